@@ -1,0 +1,112 @@
+"""The application: a registry, a world built from a scene, the schedule and the fixed-step clock.
+
+    app = App("configs/scenes/sandbox.toml", seed=3)
+    app.step(120)              # exactly 120 fixed ticks (the manual clock used by tests)
+    print(app.state_hash())
+
+A tick runs the input, script, simulation and post-simulation stages, applying deferred commands
+after every system (the sync points) and advancing the event buffers at its end.  Frames
+(:meth:`advance`) run as many ticks as the accumulator holds, then render-extract and render when a
+renderer is attached.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from engine.registry import Registry, default_registry
+from engine.scene import SceneConfig, ScenePlan, plan_scene, read_scene, spawn_plan
+from engine.schedule import FRAME_STAGES, TICK_STAGES, FixedClock, Stage
+from engine.script import ScriptRuntime
+from engine.state import Snapshot, restore, snapshot, state_hash
+from engine.world import World
+
+log = logging.getLogger("engine")
+
+
+class App:
+    """One running game: world + schedule + clock (+ an optional renderer)."""
+
+    def __init__(self, scene: str | Path | None = None, *, registry: Registry | None = None,
+                 seed: int | None = None, strict: bool = False, configs_root: Path | None = None) -> None:
+        self.scene_path = Path(scene) if scene is not None else None
+        settings = read_scene(self.scene_path)[0] if self.scene_path else SceneConfig()
+        self.config: SceneConfig = settings
+        self.registry = registry or default_registry(settings.scene.plugins)
+        self.plan: ScenePlan | None = None
+        if self.scene_path is not None:
+            self.plan = plan_scene(self.scene_path, self.registry, configs_root)
+            self.config = self.plan.config
+        self.seed = int(self.config.scene.seed if seed is None else seed)
+        self.world = World(self.seed)
+        self.schedule = self.registry.schedule
+        self.clock = FixedClock(self.config.scene.fixed_dt, self.config.scene.max_catchup_steps)
+        self.world.insert_resource(ScriptRuntime(self.registry, strict=strict))
+        self.world.insert_resource(self)  # systems reach the app (and its renderer) through the world
+        for setup in self.registry.world_setup:
+            setup(self.world)
+        if self.plan is not None:
+            spawn_plan(self.world, self.registry, self.plan)
+        self.renderer: Any = None
+        self.started = False
+        self.frame_hooks: list[Callable[[App], None]] = []
+
+    @property
+    def dt(self) -> float:
+        return self.clock.dt
+
+    # ------------------------------------------------------------------ running
+    def _run_stage(self, stage: Stage) -> None:
+        world = self.world
+        for system in self.schedule.stage(stage):
+            system.fn(world, self.clock.dt)
+            world.commands.apply()
+
+    def startup(self) -> None:
+        if not self.started:
+            self.started = True
+            self._run_stage(Stage.STARTUP)
+
+    def tick(self) -> None:
+        """One fixed step of game logic and simulation."""
+        self.startup()
+        for stage in TICK_STAGES:
+            self._run_stage(stage)
+        self.world.events.update()
+        self.world.tick += 1
+
+    def step(self, n: int = 1) -> None:
+        """Run exactly ``n`` ticks (the manual clock)."""
+        for _ in range(int(n)):
+            self.tick()
+
+    def advance(self, real_dt: float) -> int:
+        """One frame: the ticks the accumulator allows, then rendering. Returns the ticks run."""
+        steps = self.clock.advance(real_dt)
+        self.step(steps)
+        self.render_frame()
+        return steps
+
+    def render_frame(self) -> None:
+        """Render-extract and render stages (skipped when no renderer is attached)."""
+        if self.renderer is None:
+            return
+        self.startup()
+        for stage in FRAME_STAGES:
+            for system in self.schedule.stage(stage):
+                system.fn(self.world, self.clock.dt)
+        for hook in list(self.frame_hooks):
+            hook(self)
+
+    # ------------------------------------------------------------- determinism
+    def state_hash(self) -> str:
+        return state_hash(self.world)
+
+    def snapshot(self) -> Snapshot:
+        return snapshot(self.world)
+
+    def restore(self, snap: Snapshot) -> None:
+        restore(self.world, snap)

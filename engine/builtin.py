@@ -1,0 +1,154 @@
+"""The engine's core plugin: components every game needs (Name, Transform, Collider, Terrain) and the
+input and script systems.  Rendering components (Camera, Mesh) are registered by the rendering core.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from pydantic import AfterValidator, Field
+
+from engine.collider import Collider
+from typing import Annotated
+
+from engine.config import ConfigModel, Vec3, _as_tuple
+from engine.heightfield import HeightField, load_heightmap_png, midpoint_displacement
+from engine.input import InputQueue, InputState
+from engine.registry import BuildContext, Registry
+from engine.schedule import Stage
+from engine.script import destroy_scripts, run_scripts
+from engine.spatial import Transform, quat_from_euler
+from engine.world import World
+
+
+@dataclass
+class Name:
+    """A human-readable entity name (from the scene's ``name`` key)."""
+
+    value: str
+
+
+Scale3 = Annotated[list[Annotated[float, Field(ge=0.001, le=1000.0)]], Field(min_length=3, max_length=3),
+                   AfterValidator(_as_tuple)]
+
+
+class TransformConfig(ConfigModel):
+    """Position, rotation and scale of an entity."""
+
+    position: Vec3 = Field((0.0, 0.0, 0.0), description="World position in metres (x, y up, z).")
+    rotation: Vec3 = Field((0.0, 0.0, 0.0),
+                           description="Yaw, pitch, roll in degrees (yaw about +y, pitch about +x, roll about +z).")
+    scale: Scale3 = Field((1.0, 1.0, 1.0), description="Scale per axis; each in [0.001, 1000].")
+
+    def build(self) -> Transform:
+        yaw, pitch, roll = (math.radians(a) for a in self.rotation)
+        return Transform(np.array(self.position, float), quat_from_euler(yaw, pitch, roll),
+                         np.array(self.scale, float))
+
+
+class ColliderConfig(ConfigModel):
+    """A collision shape queried by effects (energy-wave hits, water bodies, dust particles)."""
+
+    shape: Literal["box", "sphere", "plane"] = Field("box", description="Shape kind (height fields come from Terrain).")
+    half_extents: Vec3 = Field((0.5, 0.5, 0.5), description="Box half sizes in local units.")
+    radius: float = Field(0.5, gt=0.0, le=10000.0, description="Sphere radius in local units.")
+    normal: Vec3 = Field((0.0, 1.0, 0.0), description="Plane normal (local); the solid side is below.")
+    offset: float = Field(0.0, ge=-1e6, le=1e6, description="Plane offset along its normal.")
+    layer: str = Field("default", max_length=64, description="Collision layer name.")
+    is_trigger: bool = Field(False, description="Reports hits but effects pass through.")
+
+
+def _build_collider(cfg: ColliderConfig, ctx: BuildContext) -> Collider:
+    return Collider(shape=cfg.shape, half_extents=np.array(cfg.half_extents, float), radius=cfg.radius,
+                    normal=np.array(cfg.normal, float), offset=cfg.offset, layer=cfg.layer,
+                    is_trigger=cfg.is_trigger)
+
+
+class TerrainConfig(ConfigModel):
+    """A height-field terrain: midpoint displacement (seeded) or a PNG height map; also a collider."""
+
+    size_exponent: int = Field(6, ge=2, le=11, description="Grid is 2^n + 1 points per side (midpoint displacement).")
+    spacing: float = Field(2.0, gt=0.0, le=1000.0, description="Distance between grid points in metres.")
+    roughness: float = Field(0.55, gt=0.0, le=1.0, description="Amplitude ratio per subdivision level (H).")
+    amplitude: float = Field(8.0, ge=0.0, le=1000.0, description="Initial random displacement in metres.")
+    heightmap: str | None = Field(None, description="PNG height map inside the configs root (instead of generation).")
+    height_scale: float = Field(10.0, gt=0.0, le=10000.0, description="Metres for a white pixel of the height map.")
+    flatten: float = Field(0.0, ge=0.0, le=1.0, description="Blend towards the mean height (1 = flat).")
+    colors: list[Vec3] = Field([(0.22, 0.35, 0.15), (0.35, 0.45, 0.2), (0.5, 0.45, 0.35), (0.9, 0.9, 0.9)],
+                               min_length=2, max_length=8, description="Colour ramp from low to high.")
+    centered: bool = Field(True, description="Centre the terrain on the entity's position.")
+
+
+@dataclass
+class Terrain:
+    """Runtime terrain: the height field (its collider is a separate Collider component)."""
+
+    config: TerrainConfig
+    field: HeightField
+
+
+def _build_terrain(cfg: TerrainConfig, ctx: BuildContext) -> list:
+    if cfg.heightmap:
+        from engine.config import resolve_inside
+
+        heights = load_heightmap_png(resolve_inside(ctx.configs_root, cfg.heightmap), cfg.height_scale)
+    else:
+        heights = midpoint_displacement(cfg.size_exponent, cfg.roughness, cfg.amplitude, ctx.rng("terrain"))
+    if cfg.flatten:
+        heights = heights + (heights.mean() - heights) * cfg.flatten
+    rows, cols = heights.shape
+    origin = np.zeros(2)
+    if cfg.centered:
+        origin = -0.5 * np.array([(cols - 1) * cfg.spacing, (rows - 1) * cfg.spacing])
+    field = HeightField(heights, cfg.spacing, origin)
+    return [Terrain(cfg, field), Collider(shape="heightfield", heightfield=field)]
+
+
+def input_system(world: World, dt: float) -> None:
+    """Input stage: fold the events due this tick into InputState (recording or replaying them)."""
+    queue = world.resource(InputQueue)
+    events = queue.take()
+    source = world.try_resource(InputSource)
+    if source is not None:
+        events = source.filter(world.tick, events)
+    world.resource(InputState).apply(events)
+
+
+class InputSource:
+    """Optional resource that records or replays the per-tick input (set by the runner)."""
+
+    def __init__(self, recorder=None, replay=None) -> None:
+        self.recorder = recorder
+        self.replay = replay
+
+    def filter(self, tick: int, events: list):
+        if self.replay is not None:
+            events = self.replay.events_for(tick)
+        if self.recorder is not None:
+            self.recorder.record(tick, events)
+        return events
+
+
+def _setup_world(world: World) -> None:
+    world.insert_resource(InputQueue())
+    world.insert_resource(InputState(), state=True)
+    world.despawn_hooks.append(destroy_scripts)
+    world.despawn_hooks.append(lambda w, e: w.random.drop(e))
+
+
+class CorePlugin:
+    name = "core"
+
+    def build(self, registry: Registry) -> None:
+        registry.add_component("Transform", TransformConfig, lambda cfg, ctx: cfg.build())
+        registry.add_component("Collider", ColliderConfig, _build_collider)
+        registry.add_component("Terrain", TerrainConfig, _build_terrain, preset_dir="terrain")
+        registry.add_system(input_system, Stage.INPUT, name="core.input")
+        registry.add_system(run_scripts, Stage.SCRIPT, name="core.scripts")
+        registry.on_world(_setup_world)
+        from engine import stock_scripts
+
+        registry.add_scripts(stock_scripts.SCRIPTS)

@@ -1,0 +1,131 @@
+"""Command line: ``python -m engine run|validate|schema|graph``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from pathlib import Path
+
+from engine.config import ConfigError, Problem, read_toml, validate
+from engine.registry import Registry, RegistryError, default_registry
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m engine", description="ecsfx engine tools")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    run = sub.add_parser("run", help="run a scene")
+    run.add_argument("scene")
+    run.add_argument("--headless", action="store_true", help="force offscreen EGL rendering")
+    run.add_argument("--no-render", action="store_true", help="simulate only, no GL at all")
+    run.add_argument("--steps", type=int, default=None, help="run exactly N fixed ticks, then exit")
+    run.add_argument("--seed", type=int, default=None)
+    run.add_argument("--hash", action="store_true", help="print the final state hash as the last line")
+    run.add_argument("--record", type=Path, help="record per-tick input to FILE")
+    run.add_argument("--replay", type=Path, help="replay per-tick input from FILE")
+    run.add_argument("--print-schedule", action="store_true", help="print the system order and exit")
+    run.add_argument("--strict", action="store_true", help="re-raise script errors")
+    run.add_argument("--screenshot", type=Path, help="write the last frame to PATH (PNG)")
+    run.add_argument("--screenshot-every", nargs=2, metavar=("N", "DIR"), help="write every N-th frame to DIR")
+    run.add_argument("--profile", action="store_true", help="print per-pass timings at exit")
+    run.add_argument("--size", nargs=2, type=int, metavar=("W", "H"), help="override the render size")
+
+    val = sub.add_parser("validate", help="validate scenes and presets")
+    val.add_argument("paths", nargs="+", type=Path)
+
+    sch = sub.add_parser("schema", help="write a JSON Schema per registered component")
+    sch.add_argument("--out", type=Path, required=True)
+
+    gr = sub.add_parser("graph", help="print the compiled render graph of a scene")
+    gr.add_argument("scene")
+    gr.add_argument("--dot", action="store_true", help="Graphviz format (culled passes dashed)")
+    gr.add_argument("--out", type=Path, help="write to a file instead of stdout")
+
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    try:
+        if args.command == "run":
+            from engine.runner import run_command
+
+            return run_command(args)
+        if args.command == "validate":
+            return validate_command(args.paths)
+        if args.command == "schema":
+            return schema_command(args.out)
+        if args.command == "graph":
+            from engine.runner import graph_command
+
+            return graph_command(args)
+    except ConfigError as exc:
+        print(exc, file=sys.stderr)
+        return 1
+    except RegistryError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _toml_files(paths: list[Path]) -> tuple[list[Path], list[Problem]]:
+    files, problems = [], []
+    for path in paths:
+        if path.is_dir():
+            files.extend(sorted(path.rglob("*.toml")))
+        elif path.is_file():
+            files.append(path)
+        else:
+            problems.append(Problem(str(path), "", "no such file or directory"))
+    return files, problems
+
+
+def validate_file(path: Path, registry: Registry) -> None:
+    """Validate one TOML file: a scene, or a preset under ``effects/<dir>/``. Raises ConfigError."""
+    from engine.scene import plan_scene
+
+    data, text = read_toml(path)
+    if path.parent.parent.name == "effects":
+        spec = registry.preset_component(path.parent.name)
+        if spec is None:
+            raise ConfigError([Problem(str(path), "", f"no registered component keeps presets in "
+                                                      f"'{path.parent.name}/'")])
+        validate(spec.model, data, str(path), (), text)
+    elif "entities" in data or "scene" in data or path.parent.name == "scenes":
+        plan_scene(path, registry)
+    else:
+        raise ConfigError([Problem(str(path), "", "neither a scene (with [scene] or [[entities]]) nor a preset "
+                                                  "under effects/<name>/")])
+
+
+def validate_command(paths: list[Path]) -> int:
+    registry = default_registry()
+    files, problems = _toml_files(paths)
+    for path in files:
+        try:
+            validate_file(path, registry)
+        except ConfigError as exc:
+            problems.extend(exc.problems)
+    for p in problems:
+        print(p, file=sys.stderr)
+    bad = len({p.file for p in problems})
+    print(f"validated {len(files)} file(s): {len(files) - bad if bad <= len(files) else 0} ok, {bad} with problems")
+    return 1 if problems else 0
+
+
+def schema_command(out: Path) -> int:
+    from engine.scene import SceneConfig
+
+    registry = default_registry()
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    for name, spec in sorted(registry.components.items()):
+        schema = spec.model.model_json_schema()
+        schema["title"] = name
+        schema.setdefault("description", spec.description)
+        target = out / f"{name}.schema.json"
+        target.write_text(json.dumps(schema, indent=2, sort_keys=True) + "\n", encoding="utf-8")
+        written.append(target)
+    scene = SceneConfig.model_json_schema()
+    (out / "scene.schema.json").write_text(json.dumps(scene, indent=2, sort_keys=True) + "\n", encoding="utf-8")
+    print(f"wrote {len(written) + 1} schema file(s) to {out}")
+    return 0

@@ -1,0 +1,278 @@
+"""Collision shapes and their vectorized queries: signed distance, penetration, ray casts.
+
+A ``Collider`` is defined in its entity's local frame and placed by the entity's ``Transform``: rotation and
+translation always apply; scale applies to the box (half extents × |scale|) and the sphere (radius × max
+|scale|); planes and height fields ignore scale (bake it into ``offset`` or the heights and spacing). Every query
+takes N points or rays at once and returns world-space results. Signed distances are negative inside.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal, get_args
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from engine.heightfield import HeightField
+from engine.spatial import Transform, quat_conjugate, quat_rotate
+
+__all__ = ["Collider", "ColliderShape", "RayHits"]
+
+F64 = NDArray[np.float64]
+ColliderShape = Literal["box", "sphere", "plane", "heightfield"]
+RayHits = tuple[NDArray[np.bool_], F64, F64]
+
+_SHAPES = get_args(ColliderShape)
+_UP = np.array([0.0, 1.0, 0.0])
+_HEIGHTFIELD_BISECTIONS = 40
+_HEIGHTFIELD_MARCH_CHUNK = 64
+
+
+def _points(points: ArrayLike, name: str) -> F64:
+    array = np.asarray(points, dtype=np.float64)
+    if array.ndim != 2 or array.shape[1] != 3:
+        raise ValueError(f"{name} must have shape (N, 3), got {array.shape}")
+    return array
+
+
+def _unit(v: F64, fallback: F64) -> F64:
+    """Normalize rows of v; rows of zero length become ``fallback``."""
+    norm = np.linalg.norm(v, axis=-1, keepdims=True)
+    safe = np.where(norm > 0.0, norm, 1.0)
+    return np.where(norm > 0.0, v / safe, fallback)
+
+
+@dataclass
+class Collider:
+    """A collision shape in local space.
+
+    box: centred cube with ``half_extents``; sphere: ``radius`` about the origin; plane: the half-space below
+    ``dot(normal, p) = offset`` (the plane passes through the origin when offset = 0; normal default +Y);
+    heightfield: everything below ``heightfield`` (distance measured vertically). ``layer`` names the collision
+    layer, ``is_trigger`` marks a volume that reports overlaps without being solid.
+    """
+
+    shape: ColliderShape = "box"
+    half_extents: F64 = field(default_factory=lambda: np.full(3, 0.5))
+    radius: float = 0.5
+    normal: F64 = field(default_factory=lambda: _UP.copy())
+    offset: float = 0.0
+    heightfield: HeightField | None = None
+    layer: str = "default"
+    is_trigger: bool = False
+
+    def __post_init__(self) -> None:
+        if self.shape not in _SHAPES:
+            raise ValueError(f"unknown collider shape {self.shape!r}; expected one of {', '.join(_SHAPES)}")
+        self.half_extents = np.array(self.half_extents, dtype=np.float64)
+        if self.half_extents.shape != (3,) or np.any(self.half_extents < 0.0):
+            raise ValueError(f"Collider.half_extents must be 3 non-negative numbers, got {self.half_extents.tolist()}")
+        self.radius = float(self.radius)
+        if self.radius < 0.0:
+            raise ValueError(f"Collider.radius must be >= 0, got {self.radius}")
+        normal = np.array(self.normal, dtype=np.float64)
+        length = np.linalg.norm(normal) if normal.shape == (3,) else 0.0
+        if length == 0.0:
+            raise ValueError(f"Collider.normal must be a non-zero 3-vector, got {normal.tolist()}")
+        self.normal = normal / length
+        self.offset = float(self.offset)
+        if self.shape == "heightfield" and self.heightfield is None:
+            raise ValueError("Collider shape 'heightfield' needs a HeightField in Collider.heightfield")
+
+    # ----------------------------------------------------------------------------------------------- queries
+
+    def signed_distance(self, points: ArrayLike, transform: Transform) -> F64:
+        """Signed distance (N,) from world points to the surface, negative inside (vertical for height fields)."""
+        return self._local_distance(self._to_local(_points(points, "points"), transform), transform)[0]
+
+    def query(self, points: ArrayLike, transform: Transform) -> tuple[F64, F64]:
+        """Penetration depth z = max(0, -signed distance) (N,) and outward unit surface normal (N, 3), world space.
+
+        The normal is that of the nearest surface point (box, sphere, plane) or of the height field at the
+        point's (x, z); it is returned for every point, penetrating or not.
+        """
+        distance, normal = self._local_distance(self._to_local(_points(points, "points"), transform), transform)
+        return np.maximum(0.0, -distance), quat_rotate(transform.rotation, normal)
+
+    def ray_cast(
+        self, origins: ArrayLike, dirs: ArrayLike, transform: Transform, max_t: float = np.inf
+    ) -> RayHits:
+        """First hit of rays o + t·d, 0 <= t <= max_t: (hit (N,) bool, t (N,), world normal (N, 3)).
+
+        ``t`` is in units of ``dirs`` (distance when they are unit). Misses have t = inf and normal 0. A ray that
+        starts inside (signed distance < 0) hits at t = 0 with the nearest surface's normal. Box: slab method
+        (Kay & Kajiya 1986); sphere: the quadratic |o + t·d|² = r²; plane: o·n + t·d·n = offset; height field:
+        march then bisect (see ``_ray_heightfield``).
+        """
+        origins, dirs = _points(origins, "origins"), _points(dirs, "dirs")
+        if origins.shape != dirs.shape:
+            raise ValueError(f"origins {origins.shape} and dirs {dirs.shape} must have the same shape")
+        inverse = quat_conjugate(transform.rotation)
+        o = quat_rotate(inverse, origins - transform.position)
+        d = quat_rotate(inverse, dirs)
+        cast = {
+            "box": self._ray_box,
+            "sphere": self._ray_sphere,
+            "plane": self._ray_plane,
+            "heightfield": self._ray_heightfield,
+        }[self.shape]
+        hit, t, normal = cast(o, d, transform, float(max_t))
+        inside_distance, inside_normal = self._local_distance(o, transform)
+        inside = inside_distance < 0.0
+        hit = hit | inside
+        t = np.where(inside, 0.0, np.where(hit, t, np.inf))
+        normal = np.where(inside[:, None], inside_normal, np.where(hit[:, None], normal, 0.0))
+        return hit, t, quat_rotate(transform.rotation, normal)
+
+    # ------------------------------------------------------------------------------------------ local frame
+
+    @staticmethod
+    def _to_local(points: F64, transform: Transform) -> F64:
+        """World → collider frame with rotation and translation only (scale is handled per shape)."""
+        return quat_rotate(quat_conjugate(transform.rotation), points - transform.position)
+
+    def _box_half_extents(self, transform: Transform) -> F64:
+        return self.half_extents * np.abs(transform.scale)
+
+    def _sphere_radius(self, transform: Transform) -> float:
+        return self.radius * float(np.max(np.abs(transform.scale)))
+
+    def _local_distance(self, p: F64, transform: Transform) -> tuple[F64, F64]:
+        """Signed distance (N,) and outward unit normal (N, 3), both in the collider frame."""
+        if self.shape == "box":
+            return self._box_distance(p, self._box_half_extents(transform))
+        if self.shape == "sphere":
+            return np.linalg.norm(p, axis=-1) - self._sphere_radius(transform), _unit(p, _UP)
+        if self.shape == "plane":
+            return p @ self.normal - self.offset, np.broadcast_to(self.normal, p.shape).copy()
+        field_ = self.heightfield
+        return p[:, 1] - field_.height_at(p[:, 0], p[:, 2]), field_.normal_at(p[:, 0], p[:, 2])
+
+    @staticmethod
+    def _box_distance(p: F64, h: F64) -> tuple[F64, F64]:
+        """Exact box SDF (Quilez): q = |p| - h; d = |max(q, 0)| + min(max_i q_i, 0).
+
+        Outside, the normal points from the nearest box point clamp(p, -h, h) to p; inside (or on the surface),
+        it is the face axis of the largest q_i with the sign of p along it.
+        """
+        q = np.abs(p) - h
+        outside = np.linalg.norm(np.maximum(q, 0.0), axis=-1)
+        inside = np.minimum(q.max(axis=-1), 0.0)
+        axis = np.argmax(q, axis=-1)
+        face = np.zeros_like(p)
+        rows = np.arange(len(p))
+        face[rows, axis] = np.where(p[rows, axis] >= 0.0, 1.0, -1.0)
+        normal = np.where((outside > 0.0)[:, None], _unit(p - np.clip(p, -h, h), _UP), face)
+        return outside + inside, normal
+
+    # ------------------------------------------------------------------------------------------- ray casts
+
+    def _ray_box(self, o: F64, d: F64, transform: Transform, max_t: float) -> RayHits:
+        h = self._box_half_extents(transform)
+        parallel = d == 0.0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = 1.0 / np.where(parallel, 1.0, d)
+            t1, t2 = (-h - o) * inv, (h - o) * inv
+        slab_in = np.abs(o) <= h
+        t_lo = np.where(parallel, np.where(slab_in, -np.inf, np.inf), np.minimum(t1, t2))
+        t_hi = np.where(parallel, np.where(slab_in, np.inf, -np.inf), np.maximum(t1, t2))
+        t_near, t_far = t_lo.max(axis=-1), t_hi.min(axis=-1)
+        hit = (t_near <= t_far) & (t_near >= 0.0) & (t_near <= max_t)
+        axis = np.argmax(t_lo, axis=-1)
+        rows = np.arange(len(o))
+        normal = np.zeros_like(o)
+        normal[rows, axis] = np.where(d[rows, axis] > 0.0, -1.0, 1.0)
+        return hit, t_near, normal
+
+    def _ray_sphere(self, o: F64, d: F64, transform: Transform, max_t: float) -> RayHits:
+        r = self._sphere_radius(transform)
+        a = np.sum(d * d, axis=-1)
+        b = np.sum(o * d, axis=-1)
+        c = np.sum(o * o, axis=-1) - r * r
+        disc = b * b - a * c
+        valid = (disc >= 0.0) & (a > 0.0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (-b - np.sqrt(np.where(valid, disc, 0.0))) / np.where(a > 0.0, a, 1.0)
+        hit = valid & (t >= 0.0) & (t <= max_t)
+        return hit, t, _unit(o + t[:, None] * d, _UP)
+
+    def _ray_plane(self, o: F64, d: F64, transform: Transform, max_t: float) -> RayHits:
+        height = o @ self.normal - self.offset
+        approach = d @ self.normal
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = -height / np.where(approach < 0.0, approach, -1.0)
+        hit = (approach < 0.0) & (height >= 0.0) & (t <= max_t)
+        return hit, t, np.broadcast_to(self.normal, o.shape).copy()
+
+    def _ray_heightfield(self, o: F64, d: F64, transform: Transform, max_t: float) -> RayHits:
+        """Ray march + bisection on f(t) = y(t) - h(x(t), z(t)).
+
+        Only the surface above the footprint is hit: the ray is first clipped to the field's bounding box (its
+        x/z footprint × [min h, max h]) and to [0, max_t]; that interval is sampled at most every spacing/2 of horizontal travel, the first sign change
+        of f (above → below) is bracketed, then bisected. Loops run over march chunks and bisection iterations,
+        each vectorized over all rays. Crossings thinner than half a cell may be missed.
+        """
+        field_ = self.heightfield
+        n = len(o)
+        (x_lo, x_hi), (z_lo, z_hi) = field_.bounds()
+        h_min, h_max = field_.height_range
+        pad = 1e-6 * (field_.spacing + h_max - h_min)  # so a flat field still brackets its crossing
+        lo = np.array([x_lo, h_min - pad, z_lo])
+        hi = np.array([x_hi, h_max + pad, z_hi])
+        parallel = d == 0.0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = 1.0 / np.where(parallel, 1.0, d)
+            t1, t2 = (lo - o) * inv, (hi - o) * inv
+        slab_in = (o >= lo) & (o <= hi)
+        t_lo = np.where(parallel, np.where(slab_in, -np.inf, np.inf), np.minimum(t1, t2))
+        t_hi = np.where(parallel, np.where(slab_in, np.inf, -np.inf), np.maximum(t1, t2))
+        t_start = np.maximum(t_lo.max(axis=-1), 0.0)
+        t_end = np.minimum(t_hi.min(axis=-1), max_t)
+        active = t_start <= t_end
+
+        def f(t: F64, rows: NDArray[np.int64]) -> F64:
+            p = o[rows] + t[:, None] * d[rows]
+            return p[:, 1] - field_.height_at(p[:, 0], p[:, 2])
+
+        horizontal = np.hypot(d[:, 0], d[:, 2]) * np.where(active, t_end - t_start, 0.0)
+        steps = int(np.ceil(np.max(horizontal, initial=0.0) / (0.5 * field_.spacing))) + 1
+
+        hit = np.zeros(n, dtype=bool)
+        t_above, t_below = np.zeros(n), np.zeros(n)
+        pending = np.flatnonzero(active)
+        span = np.where(active, t_end - t_start, 0.0)
+        previous_t = t_start.copy()
+        previous_f = np.full(n, np.inf)
+        previous_f[pending] = f(t_start[pending], pending)
+        k = 1
+        while pending.size and k <= steps:  # loop over march chunks, vectorized over rays × samples
+            ks = np.arange(k, min(k + _HEIGHTFIELD_MARCH_CHUNK, steps + 1))
+            ts = t_start[pending, None] + span[pending, None] * (ks[None, :] / steps)
+            rows = np.repeat(pending, len(ks))
+            fs = f(ts.ravel(), rows).reshape(ts.shape)
+            f_prev = np.concatenate([previous_f[pending, None], fs[:, :-1]], axis=1)
+            t_prev = np.concatenate([previous_t[pending, None], ts[:, :-1]], axis=1)
+            crossing = (f_prev >= 0.0) & (fs < 0.0)
+            found = crossing.any(axis=1)
+            first = np.argmax(crossing, axis=1)
+            rays = pending[found]
+            hit[rays] = True
+            t_above[rays] = t_prev[found, first[found]]
+            t_below[rays] = ts[found, first[found]]
+            previous_f[pending], previous_t[pending] = fs[:, -1], ts[:, -1]
+            pending = pending[~found]
+            k = ks[-1] + 1
+
+        rays = np.flatnonzero(hit)
+        a, b = t_above[rays], t_below[rays]
+        for _ in range(_HEIGHTFIELD_BISECTIONS):  # bisection iterations, vectorized over hit rays
+            mid = 0.5 * (a + b)
+            above = f(mid, rays) >= 0.0
+            a, b = np.where(above, mid, a), np.where(above, b, mid)
+        t = np.full(n, np.inf)
+        t[rays] = 0.5 * (a + b)
+        normal = np.zeros((n, 3))
+        p = o[rays] + t[rays, None] * d[rays]
+        normal[rays] = field_.normal_at(p[:, 0], p[:, 2])
+        return hit, t, normal

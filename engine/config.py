@@ -1,0 +1,256 @@
+"""TOML loading and validation with errors written for people.
+
+Every problem found in a file is collected into one :class:`ConfigError`: the file, the TOML key
+path, the offending value, what was expected, a "did you mean" for unknown names, and a line number
+where one can be found (tomllib keeps none, so :func:`locate_line` scans the text for the key).
+"""
+
+from __future__ import annotations
+
+import difflib
+import re
+import sys
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated, Any
+
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - exercised on 3.10 only
+    import tomli as tomllib
+
+
+class ConfigModel(BaseModel):
+    """Base of every config a modder writes: unknown keys are errors, strings never pass as numbers."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
+
+
+def _as_tuple(v: list[float]) -> tuple[float, ...]:
+    return tuple(float(x) for x in v)
+
+
+Vec2 = Annotated[list[float], Field(min_length=2, max_length=2), AfterValidator(_as_tuple)]
+Vec3 = Annotated[list[float], Field(min_length=3, max_length=3), AfterValidator(_as_tuple)]
+Vec4 = Annotated[list[float], Field(min_length=4, max_length=4), AfterValidator(_as_tuple)]
+Color3 = Annotated[list[Annotated[float, Field(ge=0.0, le=64.0)]], Field(min_length=3, max_length=3),
+                   AfterValidator(_as_tuple)]
+
+
+@dataclass(frozen=True)
+class Problem:
+    """One thing wrong in one file."""
+
+    file: str
+    key: str
+    message: str
+    value: Any = None
+    suggestion: str | None = None
+    line: int | None = None
+
+    def __str__(self) -> str:
+        where = f"{self.file}:{self.line}" if self.line else self.file
+        text = f"{where}: {self.key or '<file>'}: {self.message}"
+        if self.value is not None:
+            text += f" (got {_short(self.value)})"
+        if self.suggestion:
+            text += f"; did you mean '{self.suggestion}'?"
+        return text
+
+
+class ConfigError(Exception):
+    """All problems found while loading one or more config files."""
+
+    def __init__(self, problems: Sequence[Problem]) -> None:
+        self.problems = list(problems)
+        super().__init__(self._text())
+
+    def _text(self) -> str:
+        n = len(self.problems)
+        head = f"{n} problem{'s' if n != 1 else ''} in config:"
+        return "\n".join([head, *("  " + str(p) for p in self.problems)])
+
+
+def _short(value: Any, limit: int = 60) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def suggest(name: str, choices: Iterable[str]) -> str | None:
+    """The closest of ``choices`` to ``name``, if any is close enough."""
+    found = difflib.get_close_matches(str(name), sorted(choices), n=1, cutoff=0.6)
+    return found[0] if found else None
+
+
+def format_key(parts: Sequence[Any]) -> str:
+    """('entities', 0, 'components', 'X') -> 'entities[0].components.X'."""
+    out = ""
+    for part in parts:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        else:
+            out += ("." if out else "") + str(part)
+    return out
+
+
+# --------------------------------------------------------------------------- files
+def read_toml(path: Path) -> tuple[dict, str]:
+    """Parse a TOML file; syntax errors and unreadable files become :class:`ConfigError`."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError([Problem(str(path), "", "file not found")]) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError([Problem(str(path), "", f"cannot read file: {exc}")]) from None
+    try:
+        return tomllib.loads(text), text
+    except tomllib.TOMLDecodeError as exc:
+        match = re.search(r"line (\d+)", str(exc))
+        line = int(match.group(1)) if match else None
+        raise ConfigError([Problem(str(path), "", f"TOML syntax error: {exc}", line=line)]) from None
+
+
+_HEADER = re.compile(r"^\s*(\[\[?)\s*([^\]]+?)\s*\]\]?\s*(#.*)?$")
+_ASSIGN = re.compile(r"^\s*([A-Za-z0-9_\-\.\"' ]+?)\s*=")
+
+
+def _split_dotted(key: str) -> list[str]:
+    return [p.strip().strip("\"'") for p in key.split(".")]
+
+
+def locate_line(text: str, key_path: Sequence[Any]) -> int | None:
+    """Best-effort 1-based line of ``key_path`` in TOML ``text``; falls back to the nearest parent."""
+    target = format_key(key_path)
+    found: dict[str, int] = {}
+    table: list[Any] = []
+    array_counts: dict[str, int] = {}
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        header = _HEADER.match(line)
+        if header:
+            parts: list[Any] = _split_dotted(header.group(2))
+            if header.group(1) == "[[":
+                base = format_key(parts)
+                index = array_counts.get(base, -1) + 1
+                array_counts[base] = index
+                parts = parts + [index]
+            table = _resolve_arrays(parts, array_counts)
+            found.setdefault(format_key(table), lineno)
+            continue
+        assign = _ASSIGN.match(line)
+        if assign:
+            found.setdefault(format_key(table + _split_dotted(assign.group(1))), lineno)
+    parts = list(key_path)
+    while parts:
+        key = format_key(parts)
+        if key in found:
+            return found[key]
+        parts.pop()
+    return None if target else 1
+
+
+def _resolve_arrays(parts: list[Any], counts: dict[str, int]) -> list[Any]:
+    """Insert the current index after every array-of-tables prefix (``entities`` -> ``entities[2]``)."""
+    out: list[Any] = []
+    for i, part in enumerate(parts):
+        out.append(part)
+        if isinstance(part, str) and i + 1 < len(parts) and not isinstance(parts[i + 1], int):
+            prefix = format_key([p for p in out if not isinstance(p, int)])
+            if prefix in counts:
+                out.append(counts[prefix])
+    return out
+
+
+# ---------------------------------------------------------------------- validation
+def model_problems(exc: ValidationError, model: type[BaseModel], file: str, prefix: Sequence[Any],
+                   text: str | None = None, text_prefix: Sequence[Any] | None = None) -> list[Problem]:
+    """Translate a pydantic error into problems whose key paths are TOML key paths."""
+    problems = []
+    for err in exc.errors(include_url=False):
+        loc = [p for p in err["loc"] if not (isinstance(p, str) and p.startswith("function-"))]
+        suggestion = None
+        message = err["msg"]
+        if err["type"] == "extra_forbidden":
+            fields = _fields_at(model, loc[:-1])
+            suggestion = suggest(str(loc[-1]), fields)
+            message = f"unknown key '{loc[-1]}'" + (f" (valid keys: {', '.join(sorted(fields))})"
+                                                     if not suggestion and fields else "")
+        elif err["type"] == "missing":
+            message = "required key is missing"
+        elif err["type"] in ("literal_error", "enum"):
+            message = message.replace("Input should be", "expected")
+            opts = re.findall(r"'([^']+)'", err["msg"])
+            suggestion = suggest(str(err.get("input")), opts) if opts else None
+        else:
+            message = message.replace("Input should be", "expected")
+        line = locate_line(text, list(text_prefix if text_prefix is not None else prefix) + loc) if text else None
+        value = err.get("input") if err["type"] not in ("missing",) else None
+        if err["type"] == "extra_forbidden" or isinstance(value, dict):
+            value = None if isinstance(value, dict) else value
+        problems.append(Problem(file, format_key(list(prefix) + loc), message, value, suggestion, line))
+    return problems
+
+
+def _fields_at(model: type[BaseModel], loc: Sequence[Any]) -> list[str]:
+    """Field names of the (nested) model found by following ``loc``."""
+    current: Any = model
+    for part in loc:
+        if isinstance(part, int):
+            continue
+        fields = getattr(current, "model_fields", None)
+        if not fields or part not in fields:
+            return []
+        current = _model_in(fields[part].annotation)
+    fields = getattr(current, "model_fields", None)
+    return list(fields) if fields else []
+
+
+def _model_in(annotation: Any) -> Any:
+    """The first BaseModel class inside an annotation such as ``list[Foo] | None``."""
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return annotation
+    for arg in getattr(annotation, "__args__", ()) or ():
+        found = _model_in(arg)
+        if found is not None:
+            return found
+    return None
+
+
+def validate(model: type[BaseModel], data: Any, file: str, prefix: Sequence[Any] = (),
+             text: str | None = None) -> BaseModel:
+    """Validate ``data`` against ``model``; raise :class:`ConfigError` with every problem."""
+    try:
+        return model.model_validate(data)
+    except ValidationError as exc:
+        raise ConfigError(model_problems(exc, model, file, prefix, text)) from None
+
+
+# --------------------------------------------------------------------------- paths
+def resolve_inside(root: Path, relative: str, suffix: str = "") -> Path:
+    """Resolve ``relative`` under ``root``; refuse absolute paths and anything escaping ``root``."""
+    root = Path(root).resolve()
+    rel = Path(relative)
+    if rel.is_absolute() or relative.startswith(("/", "\\")) or ":" in relative:
+        raise ValueError(f"path '{relative}' must be relative to the configs root {root}")
+    if suffix and rel.suffix != suffix:
+        rel = rel.with_name(rel.name + suffix)
+    candidate = (root / rel).resolve()
+    try:
+        candidate.relative_to(root)
+    except ValueError:
+        raise ValueError(f"path '{relative}' escapes the configs root {root}") from None
+    return candidate
+
+
+def deep_merge(base: dict, override: dict) -> dict:
+    """``override`` on top of ``base``; nested tables merge, everything else replaces."""
+    out = dict(base)
+    for key, value in override.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = deep_merge(out[key], value)
+        else:
+            out[key] = value
+    return out

@@ -1,0 +1,125 @@
+"""Input: platform events in, per-tick input state out, recordable and replayable.
+
+Windows and test harnesses push :class:`InputEvent` objects into the :class:`InputQueue`; the input
+stage moves the events due this tick into :class:`InputState`.  Key names are lower-case strings
+("w", "space", "tab", "escape", "f1", "1"); mouse buttons are "left", "right", "middle".
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+
+@dataclass(frozen=True)
+class InputEvent:
+    kind: str  # key_down, key_up, mouse_move, button_down, button_up, scroll
+    key: str = ""
+    x: float = 0.0
+    y: float = 0.0
+    dx: float = 0.0
+    dy: float = 0.0
+
+    def to_json(self) -> dict[str, Any]:
+        return {k: v for k, v in asdict(self).items() if v not in ("", 0.0)} | {"kind": self.kind}
+
+
+@dataclass
+class InputQueue:
+    """Events waiting for the next tick's input stage (not part of the simulation state)."""
+
+    events: list[InputEvent] = field(default_factory=list)
+
+    def push(self, event: InputEvent) -> None:
+        self.events.append(event)
+
+    def take(self) -> list[InputEvent]:
+        events, self.events = self.events, []
+        return events
+
+
+@dataclass
+class InputState:
+    """What scripts read: held keys and buttons, this tick's presses, the mouse."""
+
+    keys_down: set[str] = field(default_factory=set)
+    pressed: set[str] = field(default_factory=set)
+    released: set[str] = field(default_factory=set)
+    mouse: tuple[float, float] = (0.0, 0.0)
+    mouse_delta: tuple[float, float] = (0.0, 0.0)
+    scroll: float = 0.0
+
+    def is_down(self, key: str) -> bool:
+        return key in self.keys_down
+
+    def was_pressed(self, key: str) -> bool:
+        return key in self.pressed
+
+    def was_released(self, key: str) -> bool:
+        return key in self.released
+
+    def apply(self, events: list[InputEvent]) -> None:
+        """Start a new tick and fold ``events`` in (buttons share the key sets, named 'mouse_left' ...)."""
+        self.pressed = set()
+        self.released = set()
+        dx = dy = 0.0
+        self.scroll = 0.0
+        for ev in events:
+            name = ev.key if ev.kind.startswith("key") else f"mouse_{ev.key}"
+            if ev.kind in ("key_down", "button_down"):
+                if name not in self.keys_down:
+                    self.pressed.add(name)
+                self.keys_down.add(name)
+                if ev.kind == "button_down":
+                    self.mouse = (ev.x, ev.y)
+            elif ev.kind in ("key_up", "button_up"):
+                self.keys_down.discard(name)
+                self.released.add(name)
+            elif ev.kind == "mouse_move":
+                self.mouse = (ev.x, ev.y)
+                dx += ev.dx
+                dy += ev.dy
+            elif ev.kind == "scroll":
+                self.scroll += ev.dy
+        self.mouse_delta = (dx, dy)
+
+
+class InputRecorder:
+    """Records the events applied at each tick; saves them as JSON lines."""
+
+    def __init__(self, meta: dict[str, Any]) -> None:
+        self.meta = meta
+        self.ticks: dict[int, list[InputEvent]] = {}
+
+    def record(self, tick: int, events: list[InputEvent]) -> None:
+        if events:
+            self.ticks[tick] = list(events)
+
+    def save(self, path: Path, total_ticks: int) -> None:
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with path.open("w", encoding="utf-8") as fh:
+            fh.write(json.dumps({"format": "ecsfx-input/1", "ticks": total_ticks, **self.meta}) + "\n")
+            for tick in sorted(self.ticks):
+                fh.write(json.dumps({"tick": tick, "events": [e.to_json() for e in self.ticks[tick]]}) + "\n")
+
+
+class InputReplay:
+    """Feeds recorded events back at the ticks they were recorded at."""
+
+    def __init__(self, path: Path) -> None:
+        lines = Path(path).read_text(encoding="utf-8").splitlines()
+        if not lines:
+            raise ValueError(f"{path}: empty input recording")
+        self.meta = json.loads(lines[0])
+        if self.meta.get("format") != "ecsfx-input/1":
+            raise ValueError(f"{path}: not an input recording (format {self.meta.get('format')!r})")
+        self.ticks: dict[int, list[InputEvent]] = {}
+        for line in lines[1:]:
+            item = json.loads(line)
+            self.ticks[int(item["tick"])] = [InputEvent(**e) for e in item["events"]]
+
+    def events_for(self, tick: int) -> list[InputEvent]:
+        return self.ticks.get(tick, [])

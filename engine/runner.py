@@ -1,0 +1,68 @@
+"""``python -m engine run`` and ``graph``: headless or windowed runs, hashes, recordings, pictures."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import sys
+from pathlib import Path
+
+from engine.app import App
+from engine.builtin import InputSource
+from engine.input import InputRecorder, InputReplay
+
+log = logging.getLogger("engine.run")
+DEFAULT_HEADLESS_STEPS = 300
+
+
+def has_display() -> bool:
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
+def attach_input_source(app: App, record: Path | None, replay: Path | None) -> InputSource | None:
+    recorder = InputRecorder({"scene": str(app.scene_path), "seed": app.seed}) if record else None
+    replayer = InputReplay(replay) if replay else None
+    if recorder is None and replayer is None:
+        return None
+    source = InputSource(recorder, replayer)
+    app.world.insert_resource(source)
+    return source
+
+
+def run_command(args: argparse.Namespace) -> int:
+    app = App(args.scene, seed=args.seed, strict=args.strict)
+    if args.print_schedule:
+        print(app.schedule.describe(app.clock.dt))
+        return 0
+    try:
+        source = attach_input_source(app, args.record, args.replay)
+    except (OSError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    steps = args.steps
+    if source is not None and source.replay is not None and steps is None:
+        steps = int(source.replay.meta.get("ticks", 0))
+    if args.no_render:
+        app.step(steps if steps is not None else DEFAULT_HEADLESS_STEPS)
+    else:
+        from engine.render.frontend import run_rendered
+
+        run_rendered(app, args, steps)
+    if source is not None and source.recorder is not None:
+        source.recorder.save(args.record, app.world.tick)
+        log.info("recorded %d ticks of input to %s", app.world.tick, args.record)
+    if args.hash:
+        print(app.state_hash())
+    return 0
+
+
+def graph_command(args: argparse.Namespace) -> int:
+    from engine.render.frontend import compiled_graph_dot
+
+    text = compiled_graph_dot(args.scene, dot=args.dot)
+    if args.out:
+        args.out.write_text(text, encoding="utf-8")
+    else:
+        print(text)
+    return 0

@@ -1,0 +1,242 @@
+"""Scenes: TOML files listing entities with components (by registered name) and scripts.
+
+    [scene]
+    name = "sandbox"
+    seed = 7
+
+    [[entities]]
+    name = "emitter"
+    scripts = [{ name = "spin", params = { speed = 45.0 } }]
+    [entities.components.Transform]
+    position = [0.0, 1.0, 0.0]
+    [entities.components.EnergyWaveEmitter]
+    preset = "energy_wave/default"   # configs/effects/energy_wave/default.toml
+    beam_speed = 30.0                # overrides the preset
+
+Loading validates everything first and reports every problem of every file at once; only a scene
+without problems is spawned, so a bad edit never leaves a half-built world.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from pydantic import Field
+
+from engine.config import (ConfigError, ConfigModel, Problem, Vec3, deep_merge, locate_line, model_problems,
+                           read_toml, resolve_inside, suggest)
+from engine.registry import BuildContext, Registry, RegistryError
+from engine.script import Scripts, make_slot
+from engine.world import World
+
+from pydantic import ValidationError
+
+
+class ScriptRef(ConfigModel):
+    name: str = Field(description="Registered script name (never a Python path).")
+    params: dict[str, Any] = Field(default_factory=dict, description="Validated by the script's Params model.")
+    enabled: bool = True
+
+
+class EntityConfig(ConfigModel):
+    name: str = Field("", max_length=128)
+    components: dict[str, dict[str, Any]] = Field(default_factory=dict)
+    scripts: list[ScriptRef] = Field(default_factory=list, max_length=64)
+
+
+class RenderSettings(ConfigModel):
+    width: int = Field(960, ge=16, le=8192, description="Window / offscreen width in pixels.")
+    height: int = Field(540, ge=16, le=8192, description="Window / offscreen height in pixels.")
+    exposure: float = Field(1.0, gt=0.0, le=64.0, description="Tone-mapping exposure.")
+    sky_top: Vec3 = Field((0.25, 0.45, 0.85), description="Sky colour at the zenith (linear RGB).")
+    sky_horizon: Vec3 = Field((0.75, 0.85, 0.95), description="Sky colour at the horizon (linear RGB).")
+    sun_direction: Vec3 = Field((0.4, 0.8, 0.3), description="Direction towards the sun.")
+    sun_color: Vec3 = Field((1.0, 0.95, 0.85), description="Sun colour and intensity.")
+    ambient: float = Field(0.35, ge=0.0, le=4.0, description="Ambient light intensity.")
+    vsync: bool = True
+
+
+class SceneSettings(ConfigModel):
+    name: str = Field("untitled", max_length=128)
+    seed: int = Field(0, ge=0, le=2**63 - 1, description="Root seed of every random stream.")
+    fixed_dt: float = Field(1.0 / 60.0, ge=1.0 / 1000.0, le=0.1, description="Fixed simulation step in seconds.")
+    max_catchup_steps: int = Field(5, ge=1, le=32, description="Cap on fixed steps run for one slow frame.")
+    plugins: list[str] | None = Field(None, description="Plugins to load (default: all installed).")
+
+
+class SceneConfig(ConfigModel):
+    scene: SceneSettings = Field(default_factory=SceneSettings)
+    render: RenderSettings = Field(default_factory=RenderSettings)
+    entities: list[EntityConfig] = Field(default_factory=list, max_length=100_000)
+
+
+@dataclass
+class EntityPlan:
+    """One validated entity, ready to spawn."""
+
+    name: str
+    components: list[tuple[str, Any]]  # (registered name, validated config)
+    scripts: list[tuple[type, Any, bool]]  # (script class, validated params, enabled)
+
+
+@dataclass
+class ScenePlan:
+    file: Path
+    configs_root: Path
+    config: SceneConfig
+    entities: list[EntityPlan] = field(default_factory=list)
+    files: list[Path] = field(default_factory=list)  # the scene and every preset it read
+
+
+def find_configs_root(path: Path) -> Path:
+    """The nearest ancestor folder named ``configs``; otherwise the scene's own folder."""
+    path = Path(path).resolve()
+    for parent in path.parents:
+        if parent.name == "configs":
+            return parent
+    return path.parent
+
+
+def read_scene(path: str | Path) -> tuple[SceneConfig, dict, str]:
+    path = Path(path)
+    data, text = read_toml(path)
+    try:
+        return SceneConfig.model_validate(data), data, text
+    except ValidationError as exc:
+        raise ConfigError(model_problems(exc, SceneConfig, str(path), (), text)) from None
+
+
+def plan_scene(path: str | Path, registry: Registry, configs_root: Path | None = None) -> ScenePlan:
+    """Validate a scene and every preset it names; raise one ConfigError listing all problems."""
+    path = Path(path)
+    config, raw, text = read_scene(path)
+    root = Path(configs_root) if configs_root else find_configs_root(path)
+    plan = ScenePlan(path, root, config, files=[path])
+    problems: list[Problem] = []
+    for i, ent in enumerate(config.entities):
+        comps = []
+        for cname, values in ent.components.items():
+            key = ("entities", i, "components", cname)
+            try:
+                comps.append((cname, load_component(registry, cname, values, path, text, key, root, plan.files)))
+            except ConfigError as exc:
+                problems.extend(exc.problems)
+        scripts = []
+        for j, ref in enumerate(ent.scripts):
+            key = ("entities", i, "scripts", j)
+            try:
+                scripts.append((*_load_script(registry, ref, path, text, key), ref.enabled))
+            except ConfigError as exc:
+                problems.extend(exc.problems)
+        plan.entities.append(EntityPlan(ent.name, comps, scripts))
+    if problems:
+        raise ConfigError(problems)
+    return plan
+
+
+def load_component(registry: Registry, cname: str, values: dict, file: Path, text: str, key: tuple,
+                   root: Path, files: list[Path] | None = None) -> Any:
+    """Validate one component table (with its optional preset) against the registered model."""
+    try:
+        spec = registry.component(cname)
+    except RegistryError as exc:
+        raise ConfigError([Problem(str(file), _fmt(key), str(exc).split(" (registered")[0].split("; did")[0],
+                                   suggestion=suggest(cname, registry.components),
+                                   line=locate_line(text, key))]) from None
+    values = dict(values)
+    preset_name = values.pop("preset", None)
+    preset: dict = {}
+    preset_file: Path | None = None
+    preset_text = ""
+    if preset_name is not None:
+        preset_file, preset, preset_text = _load_preset(spec, preset_name, file, text, key, root)
+        if files is not None and preset_file not in files:
+            files.append(preset_file)
+    merged = deep_merge(preset, values)
+    try:
+        return spec.model.model_validate(merged)
+    except ValidationError as exc:
+        problems = []
+        for p in model_problems(exc, spec.model, str(file), key, text):
+            top = p.key[len(_fmt(key)) + 1:].split(".")[0].split("[")[0]
+            if preset_file is not None and top in preset and top not in values:
+                sub = p.key[len(_fmt(key)) + 1:]
+                line = locate_line(preset_text, sub.replace("[", ".[").split(".")) if sub else None
+                p = Problem(str(preset_file), sub, p.message, p.value, p.suggestion, line)
+            problems.append(p)
+        raise ConfigError(problems) from None
+
+
+def _load_preset(spec, preset_name: Any, file: Path, text: str, key: tuple, root: Path):
+    where = dict(file=str(file), key=_fmt(key + ("preset",)), line=locate_line(text, key + ("preset",)))
+    if not isinstance(preset_name, str):
+        raise ConfigError([Problem(message="expected a preset name string", value=preset_name, **where)])
+    if spec.preset_dir is None:
+        raise ConfigError([Problem(message=f"component '{spec.name}' has no presets", value=preset_name, **where)])
+    rel = preset_name if "/" in preset_name else f"{spec.preset_dir}/{preset_name}"
+    try:
+        preset_file = resolve_inside(Path(root) / "effects", rel, ".toml")
+    except ValueError as exc:
+        raise ConfigError([Problem(message=str(exc), value=preset_name, **where)]) from None
+    if not preset_file.is_file():
+        folder = preset_file.parent
+        available = sorted(p.stem for p in folder.glob("*.toml")) if folder.is_dir() else []
+        close = suggest(preset_file.stem, available)
+        raise ConfigError([Problem(message=f"preset not found: {preset_file} (available: "
+                                   f"{', '.join(available) or 'none'})", value=preset_name,
+                                   suggestion=close, **where)])
+    data, preset_text = read_toml(preset_file)
+    return preset_file, data, preset_text
+
+
+def _load_script(registry: Registry, ref: ScriptRef, file: Path, text: str, key: tuple):
+    try:
+        cls = registry.script(ref.name)
+    except RegistryError as exc:
+        raise ConfigError([Problem(str(file), _fmt(key + ("name",)), str(exc).split("; did")[0].split(" (reg")[0],
+                                   suggestion=suggest(ref.name, registry.scripts),
+                                   line=locate_line(text, key + ("name",)))]) from None
+    try:
+        return cls, cls.Params.model_validate(ref.params)
+    except ValidationError as exc:
+        raise ConfigError(model_problems(exc, cls.Params, str(file), key + ("params",), text)) from None
+
+
+def _fmt(key: tuple) -> str:
+    from engine.config import format_key
+
+    return format_key(key)
+
+
+def spawn_plan(world: World, registry: Registry, plan: ScenePlan) -> list[int]:
+    """Create every planned entity (in file order, so ids follow the file)."""
+    from engine.builtin import Name
+
+    problems: list[Problem] = []
+    spawned = []
+    for i, ent in enumerate(plan.entities):
+        entity = world.spawn()
+        spawned.append(entity)
+        if ent.name:
+            world.add(entity, Name(ent.name))
+        ctx = BuildContext(world, entity, ent.name, str(plan.file), plan.configs_root)
+        for cname, cfg in ent.components:
+            try:
+                for comp in registry.component(cname).instantiate(cfg, ctx):
+                    world.add(entity, comp)
+            except (ValueError, OSError) as exc:
+                problems.append(Problem(str(plan.file), f"entities[{i}].components.{cname}", str(exc)))
+        if ent.scripts:
+            slots = []
+            for cls, params, enabled in ent.scripts:
+                slot = make_slot(world, entity, cls, params)
+                slot.enabled = enabled
+                slots.append(slot)
+            world.add(entity, Scripts(slots))
+    if problems:
+        for entity in spawned:
+            world.despawn(entity)
+        raise ConfigError(problems)
+    return spawned

@@ -1,0 +1,210 @@
+"""The scripting API: game logic written in Python, attached to entities by registered name.
+
+A script is a class derived from :class:`Script`, named with ``@script("name")`` and registered by a
+plugin.  TOML attaches scripts by that name only, with parameters validated by the script's
+``Params`` model: a config file can never name a Python module, class or callable.
+
+Scripts run in the script stage of every fixed tick, entities in ascending id order, each entity's
+scripts in the order attached.  An exception inside a script is logged with the entity, the script
+and the traceback, and that script is disabled; the game goes on.  In strict mode (tests) it is
+re-raised as :class:`ScriptError`.
+"""
+
+from __future__ import annotations
+
+import logging
+import traceback
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
+
+from engine.config import ConfigModel
+from engine.events import EventReader
+from engine.input import InputState
+
+if TYPE_CHECKING:
+    from engine.registry import Registry
+    from engine.world import Entity, World
+
+log = logging.getLogger("engine.script")
+S = TypeVar("S", bound=type)
+T = TypeVar("T")
+
+
+class NoParams(ConfigModel):
+    """A script without parameters."""
+
+
+def script(name: str):
+    """Class decorator: give a :class:`Script` subclass its registered name."""
+
+    def mark(cls: S) -> S:
+        cls.script_name = name
+        return cls
+
+    return mark
+
+
+class ScriptError(RuntimeError):
+    """A script raised (re-raised in strict mode)."""
+
+
+class ScriptContext:
+    """What a script may touch: its entity, queries, commands, input, events, randomness, plugin commands."""
+
+    def __init__(self, world: World, entity: Entity, script_name: str) -> None:
+        self.world = world
+        self.entity = entity
+        self.script_name = script_name
+
+    # components of this entity
+    def get(self, ctype: type[T]) -> T:
+        return self.world.get(self.entity, ctype)
+
+    def try_get(self, ctype: type[T]) -> T | None:
+        return self.world.try_get(self.entity, ctype)
+
+    def query(self, *ctypes: type, exclude: tuple[type, ...] = ()):
+        return self.world.query(*ctypes, exclude=exclude)
+
+    @property
+    def commands(self):
+        return self.world.commands
+
+    def spawn(self, *components: Any) -> Entity:
+        return self.world.commands.spawn(*components)
+
+    def despawn(self, entity: Entity | None = None) -> None:
+        self.world.commands.despawn(self.entity if entity is None else entity)
+
+    @property
+    def input(self) -> InputState:
+        return self.world.resource(InputState)
+
+    def send(self, event: Any) -> None:
+        self.world.events.send(event)
+
+    def resource(self, rtype: type[T]) -> T:
+        return self.world.resource(rtype)
+
+    @property
+    def rng(self):
+        """This entity's own random stream for this script."""
+        return self.world.random.stream(f"script:{self.script_name}", self.entity)
+
+    @property
+    def tick(self) -> int:
+        return self.world.tick
+
+    def call(self, command: str, **kwargs: Any) -> Any:
+        """Run a command a plugin published (for example ``"energy_wave.fire"``)."""
+        registry = self.world.resource(ScriptRuntime).registry
+        return registry.command(command)(self.world, self.entity, **kwargs)
+
+
+class Script:
+    """Base class of game scripts; override the hooks you need."""
+
+    script_name: ClassVar[str] = ""
+    Params: ClassVar[type[ConfigModel]] = NoParams
+    events: ClassVar[tuple[type, ...]] = ()  # event types delivered to on_event
+
+    def __init__(self, ctx: ScriptContext, params: ConfigModel) -> None:
+        self.ctx = ctx
+        self.params = params
+
+    def on_start(self) -> None: ...
+
+    def on_update(self, dt: float) -> None: ...
+
+    def on_event(self, event: Any) -> None: ...
+
+    def on_destroy(self) -> None: ...
+
+    def __hash_state__(self) -> dict[str, Any]:
+        return {k: v for k, v in vars(self).items() if k != "ctx"}
+
+
+@dataclass
+class ScriptSlot:
+    name: str
+    script: Script
+    enabled: bool = True
+    started: bool = False
+    readers: list[EventReader] = field(default_factory=list)
+
+    def __hash_state__(self) -> tuple:
+        return (self.name, self.enabled, self.started, self.script, [r.cursor for r in self.readers])
+
+
+@dataclass
+class Scripts:
+    """The component holding an entity's script instances."""
+
+    slots: list[ScriptSlot] = field(default_factory=list)
+
+
+@dataclass
+class ScriptFailure:
+    """Event sent when a script raised and was disabled."""
+
+    entity: int
+    script: str
+    hook: str
+    error: str
+    traceback: str
+
+
+class ScriptRuntime:
+    """World resource: the registry for commands, strict mode, and the failures so far."""
+
+    def __init__(self, registry: Registry, strict: bool = False) -> None:
+        self.registry = registry
+        self.strict = strict
+        self.failures: list[ScriptFailure] = []
+
+
+def make_slot(world: World, entity: Entity, cls: type[Script], params: ConfigModel) -> ScriptSlot:
+    ctx = ScriptContext(world, entity, cls.script_name)
+    instance = cls(ctx, params)
+    readers = [world.events.reader(t) for t in cls.events]
+    return ScriptSlot(cls.script_name, instance, readers=readers)
+
+
+def _invoke(world: World, entity: Entity, slot: ScriptSlot, hook: str, *args: Any) -> None:
+    try:
+        getattr(slot.script, hook)(*args)
+    except Exception as exc:  # a script must never take the game down
+        runtime = world.resource(ScriptRuntime)
+        slot.enabled = False
+        tb = traceback.format_exc()
+        failure = ScriptFailure(entity, slot.name, hook, f"{type(exc).__name__}: {exc}", tb)
+        runtime.failures.append(failure)
+        world.events.send(failure)
+        if runtime.strict:
+            raise ScriptError(f"script '{slot.name}' on entity {entity} raised in {hook}: {exc}") from exc
+        log.error("script '%s' on entity %d raised in %s and was disabled:\n%s", slot.name, entity, hook, tb)
+
+
+def run_scripts(world: World, dt: float) -> None:
+    """The script stage: start, deliver events, update; entities ascending, slots in order."""
+    for entity, (scripts,) in list(world.query(Scripts)):
+        for slot in scripts.slots:
+            if slot.enabled and not slot.started:
+                slot.started = True
+                _invoke(world, entity, slot, "on_start")
+            for reader in slot.readers:
+                for event in reader.read():
+                    if slot.enabled:
+                        _invoke(world, entity, slot, "on_event", event)
+            if slot.enabled:
+                _invoke(world, entity, slot, "on_update", dt)
+
+
+def destroy_scripts(world: World, entity: Entity) -> None:
+    """Despawn hook: call ``on_destroy`` of the entity's started scripts."""
+    scripts = world.try_get(entity, Scripts)
+    if scripts is None:
+        return
+    for slot in scripts.slots:
+        if slot.enabled and slot.started:
+            _invoke(world, entity, slot, "on_destroy")

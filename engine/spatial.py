@@ -1,0 +1,173 @@
+"""Quaternion helpers and the runtime ``Transform``.
+
+Conventions: quaternions are float64 arrays in (w, x, y, z) order; every helper accepts a single quaternion
+(4,) or a stack (..., 4) and broadcasts. Space is right-handed with +Y up; a camera or entity looks down its
+local -Z axis, +X is its right. Rotations act on column vectors (``R @ v``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = [
+    "Transform",
+    "quat_conjugate",
+    "quat_from_axis_angle",
+    "quat_from_euler",
+    "quat_identity",
+    "quat_mul",
+    "quat_normalize",
+    "quat_rotate",
+    "quat_to_matrix",
+]
+
+F64 = NDArray[np.float64]
+
+
+def quat_identity() -> F64:
+    """The identity rotation (1, 0, 0, 0)."""
+    return np.array([1.0, 0.0, 0.0, 0.0])
+
+
+def quat_normalize(q: ArrayLike) -> F64:
+    """Unit quaternion q / |q|; raises ``ValueError`` for a zero quaternion."""
+    q = np.asarray(q, dtype=np.float64)
+    norm = np.linalg.norm(q, axis=-1, keepdims=True)
+    if np.any(norm == 0.0):
+        raise ValueError("cannot normalize a zero quaternion (0, 0, 0, 0)")
+    return q / norm
+
+
+def quat_from_axis_angle(axis: ArrayLike, angle: ArrayLike) -> F64:
+    """Rotation by ``angle`` radians about ``axis`` (right-hand rule): q = (cos(θ/2), sin(θ/2)·â)."""
+    axis = np.asarray(axis, dtype=np.float64)
+    norm = np.linalg.norm(axis, axis=-1, keepdims=True)
+    if np.any(norm == 0.0):
+        raise ValueError(f"rotation axis must be non-zero, got {axis.tolist()}")
+    half = 0.5 * np.asarray(angle, dtype=np.float64)[..., None]
+    vector = np.sin(half) * axis / norm
+    return np.concatenate([np.broadcast_to(np.cos(half), vector.shape[:-1] + (1,)), vector], axis=-1)
+
+
+def quat_mul(a: ArrayLike, b: ArrayLike) -> F64:
+    """Hamilton product a ⊗ b: the rotation that applies ``b`` first, then ``a``."""
+    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    aw, ax, ay, az = np.moveaxis(a, -1, 0)
+    bw, bx, by, bz = np.moveaxis(b, -1, 0)
+    return np.stack(
+        [
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ],
+        axis=-1,
+    )
+
+
+def quat_from_euler(yaw: float, pitch: float, roll: float) -> F64:
+    """Rotation from Euler angles in radians, y up, right-handed, applied roll → pitch → yaw.
+
+    ``q = q_yaw(+Y) ⊗ q_pitch(+X) ⊗ q_roll(+Z)`` (intrinsic Y-X'-Z''). With the forward axis -Z: positive yaw
+    turns forward towards -X (left, counter-clockwise seen from above), positive pitch tilts it up towards +Y,
+    positive roll turns +X (right) towards +Y.
+    """
+    q_yaw = quat_from_axis_angle((0.0, 1.0, 0.0), yaw)
+    q_pitch = quat_from_axis_angle((1.0, 0.0, 0.0), pitch)
+    q_roll = quat_from_axis_angle((0.0, 0.0, 1.0), roll)
+    return quat_mul(q_yaw, quat_mul(q_pitch, q_roll))
+
+
+def quat_conjugate(q: ArrayLike) -> F64:
+    """(w, -x, -y, -z): the inverse rotation of a unit quaternion."""
+    q = np.array(q, dtype=np.float64)
+    q[..., 1:] *= -1.0
+    return q
+
+
+def quat_rotate(q: ArrayLike, v: ArrayLike) -> F64:
+    """Rotate vectors ``v`` (..., 3) by unit quaternion(s) ``q``: v' = v + 2u×(u×v + w·v), u = (x, y, z).
+
+    This is q v q* expanded without forming the product; ``q`` broadcasts against ``v`` (one q for (N, 3)
+    points, or one q per point).
+    """
+    q, v = np.asarray(q, dtype=np.float64), np.asarray(v, dtype=np.float64)
+    w, u = q[..., :1], q[..., 1:]
+    return v + 2.0 * np.cross(u, np.cross(u, v) + w * v)
+
+
+def quat_to_matrix(q: ArrayLike) -> F64:
+    """3×3 rotation matrix (column-vector convention) of q, with s = 2/|q|² so non-unit q still give a rotation."""
+    q = np.asarray(q, dtype=np.float64)
+    w, x, y, z = np.moveaxis(q, -1, 0)
+    s = 2.0 / np.sum(q * q, axis=-1)
+    rows = [
+        [1.0 - s * (y * y + z * z), s * (x * y - w * z), s * (x * z + w * y)],
+        [s * (x * y + w * z), 1.0 - s * (x * x + z * z), s * (y * z - w * x)],
+        [s * (x * z - w * y), s * (y * z + w * x), 1.0 - s * (x * x + y * y)],
+    ]
+    return np.stack([np.stack(row, axis=-1) for row in rows], axis=-2)
+
+
+def _vec3(value: ArrayLike, name: str) -> F64:
+    array = np.array(value, dtype=np.float64)
+    if array.shape != (3,):
+        raise ValueError(f"Transform.{name} must have shape (3,), got {array.shape}: {array.tolist()}")
+    return array
+
+
+@dataclass
+class Transform:
+    """Position, rotation (unit quaternion w, x, y, z) and per-axis scale of an entity, all float64.
+
+    ``to_world(p) = position + R · (scale * p)``; the matrix is T·R·S for column vectors, i.e.
+    ``matrix() @ [x, y, z, 1]``.
+    """
+
+    position: F64 = field(default_factory=lambda: np.zeros(3))
+    rotation: F64 = field(default_factory=quat_identity)
+    scale: F64 = field(default_factory=lambda: np.ones(3))
+
+    def __post_init__(self) -> None:
+        self.position = _vec3(self.position, "position")
+        self.scale = _vec3(self.scale, "scale")
+        rotation = np.array(self.rotation, dtype=np.float64)
+        if rotation.shape != (4,):
+            raise ValueError(f"Transform.rotation must be a (w, x, y, z) quaternion, got shape {rotation.shape}")
+        self.rotation = rotation
+
+    def rotation_matrix(self) -> F64:
+        """3×3 rotation R of ``rotation``."""
+        return quat_to_matrix(self.rotation)
+
+    def matrix(self) -> F64:
+        """4×4 model matrix T·R·S (column vectors: world = M @ [x, y, z, 1])."""
+        m = np.eye(4)
+        m[:3, :3] = self.rotation_matrix() * self.scale[None, :]
+        m[:3, 3] = self.position
+        return m
+
+    def forward(self) -> F64:
+        """World direction of the local -Z axis (where the entity looks), unit length."""
+        return quat_rotate(self.rotation, np.array([0.0, 0.0, -1.0]))
+
+    def right(self) -> F64:
+        """World direction of the local +X axis, unit length."""
+        return quat_rotate(self.rotation, np.array([1.0, 0.0, 0.0]))
+
+    def up(self) -> F64:
+        """World direction of the local +Y axis, unit length."""
+        return quat_rotate(self.rotation, np.array([0.0, 1.0, 0.0]))
+
+    def to_world(self, points: ArrayLike) -> F64:
+        """Local points (N, 3) to world: position + R · (scale * p)."""
+        points = np.asarray(points, dtype=np.float64)
+        return self.position + quat_rotate(self.rotation, points * self.scale)
+
+    def to_local(self, points: ArrayLike) -> F64:
+        """World points (N, 3) to local: R⁻¹ · (p - position) / scale (inverse of :meth:`to_world`)."""
+        points = np.asarray(points, dtype=np.float64)
+        return quat_rotate(quat_conjugate(self.rotation), points - self.position) / self.scale

@@ -1,0 +1,192 @@
+"""Tests for engine.collider: signed distances, penetration queries and ray casts per shape."""
+
+import numpy as np
+import pytest
+
+from engine.collider import Collider
+from engine.heightfield import HeightField
+from engine.spatial import Transform, quat_from_axis_angle, quat_from_euler
+
+SQRT2 = np.sqrt(2.0)
+
+
+def _tilted_field(slope_x=0.5, slope_z=0.25, base=1.0):
+    """Height field sampling the plane h = base + slope_x·x + slope_z·z on [-4, 4]²."""
+    xs = np.linspace(-4.0, 4.0, 17)
+    heights = base + slope_x * xs[None, :] + slope_z * xs[:, None]
+    return HeightField(heights=heights, spacing=0.5, origin=np.array([-4.0, -4.0]))
+
+
+def test_box_signed_distance_and_normals_axis_aligned():
+    box = Collider(shape="box", half_extents=[1.0, 2.0, 3.0])
+    t = Transform(position=[10.0, 0.0, 0.0])
+    points = np.array([
+        [12.0, 0.0, 0.0],   # 1 outside +x face
+        [10.0, -2.5, 0.0],  # 0.5 outside -y face
+        [10.5, 0.0, 0.0],   # inside, nearest +x face at 0.5
+        [10.0, 0.0, -2.9],  # inside, nearest -z face at 0.1
+        [12.0, 3.0, 0.0],   # outside the +x+y edge: distance sqrt(2)
+        [10.0, 0.0, 0.0],   # centre: nearest face x at 1
+    ])
+    d = box.signed_distance(points, t)
+    np.testing.assert_allclose(d, [1.0, 0.5, -0.5, -0.1, SQRT2, -1.0], atol=1e-12)
+    depth, normal = box.query(points, t)
+    np.testing.assert_allclose(depth, [0.0, 0.0, 0.5, 0.1, 0.0, 1.0], atol=1e-12)
+    expected = [[1, 0, 0], [0, -1, 0], [1, 0, 0], [0, 0, -1], [1 / SQRT2, 1 / SQRT2, 0], [1, 0, 0]]
+    np.testing.assert_allclose(normal, expected, atol=1e-12)
+
+
+def test_rotated_and_scaled_box():
+    box = Collider(shape="box", half_extents=[1.0, 1.0, 1.0])
+    t = Transform(position=[0.0, 1.0, 0.0], rotation=quat_from_axis_angle([0, 1, 0], np.pi / 4))
+    points = np.array([[1.5, 1.0, 0.0], [0.0, 1.0, 1.6], [0.3, 1.0, 0.3]])
+    d = box.signed_distance(points, t)
+    # The vertical edges of the rotated unit cube lie at distance sqrt(2) on the x and z axes.
+    np.testing.assert_allclose(d[:2], [1.5 - SQRT2, 1.6 - SQRT2], atol=1e-12)
+    # (0.3, 0.3) is along a face normal of the rotated cube, 0.3·sqrt(2) from the centre.
+    np.testing.assert_allclose(d[2], 0.3 * SQRT2 - 1.0, atol=1e-12)
+    depth, normal = box.query(points, t)
+    np.testing.assert_allclose(normal, [[1, 0, 0], [0, 0, 1], [1 / SQRT2, 0, 1 / SQRT2]], atol=1e-12)
+    np.testing.assert_allclose(depth, [0.0, 0.0, 1.0 - 0.3 * SQRT2], atol=1e-12)
+    stretched = Transform(scale=[2.0, 1.0, -1.0])  # per-axis, sign ignored
+    np.testing.assert_allclose(box.signed_distance([[2.5, 0, 0], [0, 0, 1.5], [0, 1.5, 0]], stretched),
+                               [0.5, 0.5, 0.5], atol=1e-12)
+
+
+def test_sphere_distance_normal_and_max_scale():
+    sphere = Collider(shape="sphere", radius=1.0)
+    t = Transform(position=[0.0, 1.0, 0.0], scale=[1.0, 3.0, 2.0])  # radius × 3
+    points = np.array([[0.0, 5.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, -4.0], [0.0, 1.0, 0.0]])
+    np.testing.assert_allclose(sphere.signed_distance(points, t), [1.0, -2.0, 1.0, -3.0], atol=1e-12)
+    depth, normal = sphere.query(points, t)
+    np.testing.assert_allclose(depth, [0.0, 2.0, 0.0, 3.0], atol=1e-12)
+    np.testing.assert_allclose(normal, [[0, 1, 0], [1, 0, 0], [0, 0, -1], [0, 1, 0]], atol=1e-12)
+
+
+def test_plane_default_up_rotated_and_offset():
+    plane = Collider(shape="plane")
+    depth, normal = plane.query(np.array([[3.0, -0.25, 7.0], [0.0, 2.0, 0.0]]), Transform(position=[0, 0, 0]))
+    np.testing.assert_allclose(depth, [0.25, 0.0])
+    np.testing.assert_allclose(normal, [[0, 1, 0], [0, 1, 0]])
+    # A plane tilted 90° about z faces -x; offset shifts it along its own normal.
+    tilted = Collider(shape="plane", normal=[0.0, 2.0, 0.0], offset=0.5)
+    t = Transform(position=[1.0, 0.0, 0.0], rotation=quat_from_axis_angle([0, 0, 1], np.pi / 2))
+    d = tilted.signed_distance(np.array([[-2.0, 5.0, 1.0], [1.0, 0.0, 0.0]]), t)
+    np.testing.assert_allclose(d, [2.5, -0.5], atol=1e-12)
+    np.testing.assert_allclose(tilted.query(np.array([[0.0, 0.0, 0.0]]), t)[1], [[-1, 0, 0]], atol=1e-12)
+
+
+def test_heightfield_depth_and_normal_on_tilted_plane():
+    collider = Collider(shape="heightfield", heightfield=_tilted_field())
+    t = Transform(position=[0.0, -1.0, 0.0])
+    rng = np.random.default_rng(3)
+    xz = rng.uniform(-3.5, 3.5, size=(40, 2))
+    surface_y = 1.0 + 0.5 * xz[:, 0] + 0.25 * xz[:, 1] - 1.0
+    y = surface_y + rng.uniform(-1.0, 1.0, size=40)
+    points = np.column_stack([xz[:, 0], y, xz[:, 1]])
+    np.testing.assert_allclose(collider.signed_distance(points, t), y - surface_y, atol=1e-12)
+    depth, normal = collider.query(points, t)
+    np.testing.assert_allclose(depth, np.maximum(0.0, surface_y - y), atol=1e-12)
+    expected = np.array([-0.5, 1.0, -0.25]) / np.linalg.norm([-0.5, 1.0, -0.25])
+    np.testing.assert_allclose(normal, np.broadcast_to(expected, (40, 3)), atol=1e-12)
+
+
+def test_box_ray_cast():
+    box = Collider(shape="box", half_extents=[1.0, 1.0, 1.0])
+    t = Transform(position=[0.0, 0.0, 0.0], rotation=quat_from_axis_angle([0, 1, 0], np.pi / 4))
+    origins = np.array([[-5.0, 0.0, 0.0], [-5.0, 3.0, 0.0], [0.0, 5.0, 0.0], [0.2, 0.0, 0.0], [-5.0, 0.0, 0.0]])
+    dirs = np.array([[1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, -2.0, 0.0], [1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]])
+    hit, dist, normal = box.ray_cast(origins, dirs, t, max_t=100.0)
+    np.testing.assert_array_equal(hit, [True, False, True, True, False])
+    np.testing.assert_allclose(dist[hit], [5.0 - SQRT2, 2.0, 0.0], atol=1e-12)  # t in units of dirs
+    assert np.all(np.isinf(dist[~hit])) and np.all(normal[~hit] == 0.0)
+    assert normal[0] @ np.array([-1.0, 0.0, 0.0]) > 0.0 and abs(np.linalg.norm(normal[0]) - 1.0) < 1e-12
+    np.testing.assert_allclose(normal[2], [0, 1, 0], atol=1e-12)
+    np.testing.assert_allclose(normal[3], [1 / SQRT2, 0, 1 / SQRT2], atol=1e-12)  # inside: nearest face
+    short = box.ray_cast(origins[:1], dirs[:1], t, max_t=3.0)
+    assert not short[0][0]
+    axis_aligned = box.ray_cast(np.array([[0.5, 0.5, 9.0]]), np.array([[0.0, 0.0, -1.0]]), Transform())
+    np.testing.assert_allclose(axis_aligned[1], [8.0])
+    np.testing.assert_allclose(axis_aligned[2], [[0, 0, 1]])
+
+
+def test_sphere_and_plane_ray_cast():
+    sphere = Collider(shape="sphere", radius=1.0)
+    t = Transform(position=[0.0, 0.0, 2.0])
+    hit, dist, normal = sphere.ray_cast(
+        np.array([[0.0, 0.0, -3.0], [0.0, 1.5, -3.0], [0.0, 0.0, 7.0]]),
+        np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0]]),
+        t,
+    )
+    np.testing.assert_array_equal(hit, [True, False, False])
+    np.testing.assert_allclose(dist[0], 4.0)
+    np.testing.assert_allclose(normal[0], [0, 0, -1])
+
+    plane = Collider(shape="plane", offset=1.0)
+    origins = np.array([[0.0, 5.0, 0.0], [0.0, 5.0, 0.0], [0.0, 5.0, 0.0], [2.0, 5.0, 0.0]])
+    dirs = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, -1.0, 0.0]])
+    hit, dist, normal = plane.ray_cast(origins, dirs, Transform(), max_t=10.0)
+    np.testing.assert_array_equal(hit, [True, False, False, True])
+    np.testing.assert_allclose(dist[hit], [4.0, 4.0])
+    np.testing.assert_allclose(normal[hit], [[0, 1, 0], [0, 1, 0]])
+
+
+def test_ray_hits_lie_on_the_surface():
+    rng = np.random.default_rng(5)
+    origins = rng.uniform(-6.0, 6.0, size=(300, 3))
+    dirs = -origins + rng.normal(scale=0.5, size=(300, 3))
+    t = Transform(position=[0.1, -0.2, 0.3], rotation=quat_from_euler(0.4, 0.9, -0.3), scale=[1.0, 2.0, 1.5])
+    for collider in (Collider(shape="box", half_extents=[1.0, 0.5, 2.0]), Collider(shape="sphere", radius=1.2)):
+        hit, dist, normal = collider.ray_cast(origins, dirs, t)
+        outside = collider.signed_distance(origins, t) > 0.0
+        hits = hit & outside
+        assert hits.sum() > 50
+        points = origins[hits] + dist[hits, None] * dirs[hits]
+        np.testing.assert_allclose(collider.signed_distance(points, t), 0.0, atol=1e-9)
+        _, surface_normal = collider.query(points, t)
+        np.testing.assert_allclose(np.sum(normal[hits] * surface_normal, axis=1), 1.0, atol=1e-6)
+
+
+def test_heightfield_ray_cast_march_and_bisection():
+    collider = Collider(shape="heightfield", heightfield=_tilted_field())
+    t = Transform(position=[0.0, 0.0, 0.0])
+    origins = np.array([
+        [1.0, 10.0, 2.0],   # straight down
+        [-3.0, 8.0, -3.0],  # oblique
+        [1.0, 10.0, 2.0],   # straight up: miss
+        [20.0, 10.0, 0.0],  # outside the footprint: miss
+        [0.0, -5.0, 0.0],   # starts below the surface: t = 0
+    ])
+    dirs = np.array([[0.0, -1.0, 0.0], [1.0, -1.0, 0.5], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.0, 1.0, 0.0]])
+    hit, dist, normal = collider.ray_cast(origins, dirs, t, max_t=50.0)
+    np.testing.assert_array_equal(hit, [True, True, False, False, True])
+    np.testing.assert_allclose(dist[0], 10.0 - (1.0 + 0.5 + 0.5), atol=1e-9)
+    # Oblique ray: 8 - s = 1 + 0.5(-3 + s) + 0.25(-3 + 0.5 s)  ->  s = 9.25 / 1.625
+    np.testing.assert_allclose(dist[1], 9.25 / 1.625, atol=1e-9)
+    np.testing.assert_allclose(dist[4], 0.0)
+    expected = np.array([-0.5, 1.0, -0.25]) / np.linalg.norm([-0.5, 1.0, -0.25])
+    np.testing.assert_allclose(normal[[0, 1, 4]], np.broadcast_to(expected, (3, 3)), atol=1e-12)
+    assert not collider.ray_cast(origins[:1], dirs[:1], t, max_t=7.0)[0][0]
+
+
+def test_flat_heightfield_ray_cast_and_rotation():
+    flat = HeightField(heights=np.full((3, 3), 2.0), spacing=1.0, origin=[-1.0, -1.0])
+    collider = Collider(shape="heightfield", heightfield=flat)
+    # Rotated 90° about x: the field's up (+y) becomes world +z.
+    t = Transform(position=[0.0, 0.0, 1.0], rotation=quat_from_axis_angle([1, 0, 0], np.pi / 2))
+    hit, dist, normal = collider.ray_cast(np.array([[0.5, 0.5, 10.0]]), np.array([[0.0, 0.0, -1.0]]), t)
+    assert hit[0]
+    np.testing.assert_allclose(dist, [7.0], atol=1e-9)
+    np.testing.assert_allclose(normal, [[0, 0, 1]], atol=1e-12)
+
+
+def test_constructor_validation():
+    with pytest.raises(ValueError, match="unknown collider shape 'cube'"):
+        Collider(shape="cube")
+    with pytest.raises(ValueError, match="HeightField"):
+        Collider(shape="heightfield")
+    with pytest.raises(ValueError, match="normal"):
+        Collider(shape="plane", normal=[0.0, 0.0, 0.0])
+    c = Collider(shape="sphere", layer="debris", is_trigger=True)
+    assert c.layer == "debris" and c.is_trigger
+    np.testing.assert_array_equal(Collider().normal, [0, 1, 0])
