@@ -77,7 +77,7 @@ class TerrainConfig(ConfigModel):
     heightmap: str | None = Field(None, description="PNG height map inside the configs root (instead of generation).")
     height_scale: float = Field(10.0, gt=0.0, le=10000.0, description="Metres for a white pixel of the height map.")
     flatten: float = Field(0.0, ge=0.0, le=1.0, description="Blend towards the mean height (1 = flat).")
-    colors: list[Vec3] = Field([(0.22, 0.35, 0.15), (0.35, 0.45, 0.2), (0.5, 0.45, 0.35), (0.9, 0.9, 0.9)],
+    colors: list[Vec3] = Field([(0.07, 0.15, 0.04), (0.13, 0.22, 0.06), (0.28, 0.24, 0.16), (0.75, 0.75, 0.75)],
                                min_length=2, max_length=8, description="Colour ramp from low to high.")
     centered: bool = Field(True, description="Centre the terrain on the entity's position.")
 

@@ -209,9 +209,10 @@ class Collider:
         """Ray march + bisection on f(t) = y(t) - h(x(t), z(t)).
 
         Only the surface above the footprint is hit: the ray is first clipped to the field's bounding box (its
-        x/z footprint × [min h, max h]) and to [0, max_t]; that interval is sampled at most every spacing/2 of horizontal travel, the first sign change
-        of f (above → below) is bracketed, then bisected. Loops run over march chunks and bisection iterations,
-        each vectorized over all rays. Crossings thinner than half a cell may be missed.
+        x/z footprint × [min h, max h]) and to [0, max_t]; that interval is sampled at most every spacing/2 of
+        horizontal travel, the first sign change of f (above → below) is bracketed, then bisected. Loops run over
+        march chunks and bisection iterations, each vectorized over all rays. Crossings thinner than half a cell
+        may be missed.
         """
         field_ = self.heightfield
         n = len(o)

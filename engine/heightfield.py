@@ -66,8 +66,9 @@ class HeightField:
         return top + tz * (bottom - top)
 
     def normal_at(self, x: ArrayLike, z: ArrayLike) -> F64:
-        """Unit normal (..., 3) = normalize(-∂h/∂x, 1, -∂h/∂z), the slopes by central differences of the bilinear
-        surface over ±spacing/2 (one-sided at the borders; outside the grid, the normal of the nearest border point)."""
+        """Unit normal (..., 3) = normalize(-∂h/∂x, 1, -∂h/∂z), the slopes by central differences of the
+        bilinear surface over ±spacing/2 (one-sided at the borders; outside the grid, the normal of the nearest
+        border point)."""
         x, z = np.broadcast_arrays(np.asarray(x, dtype=np.float64), np.asarray(z, dtype=np.float64))
         (x_lo, x_hi), (z_lo, z_hi) = self.bounds()
         x, z = np.clip(x, x_lo, x_hi), np.clip(z, z_lo, z_hi)
@@ -114,7 +115,9 @@ def midpoint_displacement(n: int, roughness: float, amplitude: float, rng: np.ra
         scale *= roughness
         cells = size // step
         # Diamond step: centre of each square = mean of its 4 corners + displacement.
-        corners = h[0:-1:step, 0:-1:step] + h[0:-1:step, step::step] + h[step::step, 0:-1:step] + h[step::step, step::step]
+        corners = (
+            h[0:-1:step, 0:-1:step] + h[0:-1:step, step::step] + h[step::step, 0:-1:step] + h[step::step, step::step]
+        )
         h[half::step, half::step] = 0.25 * corners + rng.uniform(-scale, scale, size=(cells, cells))
         centres = h[half::step, half::step]
         # Square step, edge midpoints on corner rows: left/right corners, centres above/below.

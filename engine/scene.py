@@ -55,6 +55,7 @@ class RenderSettings(ConfigModel):
     sun_direction: Vec3 = Field((0.4, 0.8, 0.3), description="Direction towards the sun.")
     sun_color: Vec3 = Field((1.0, 0.95, 0.85), description="Sun colour and intensity.")
     ambient: float = Field(0.35, ge=0.0, le=4.0, description="Ambient light intensity.")
+    fog_density: float = Field(0.004, ge=0.0, le=1.0, description="Exponential distance fog per metre.")
     vsync: bool = True
 
 

@@ -73,6 +73,31 @@ def test_midpoint_displacement_is_averaging_plus_bounded_offsets():
     np.testing.assert_array_equal(zero, 0.0)
 
 
+def test_every_level_is_neighbour_mean_plus_bounded_displacement():
+    """Scalar check of the diamond-square rules on the final grid: each point set at the level with step s
+    differs from the mean of its (coarser, never rewritten) neighbours by at most amplitude·roughness^level."""
+    n, roughness, amplitude = 4, 0.5, 1.0
+    grid = midpoint_displacement(n, roughness, amplitude, np.random.default_rng(2))
+    size = 2**n
+    step, level, exceeded_half = size, 1, False
+    while step > 1:
+        half, bound = step // 2, amplitude * roughness**level
+        for r in range(half, size, step):
+            for c in range(half, size, step):
+                mean = np.mean([grid[r - half, c - half], grid[r - half, c + half],
+                                grid[r + half, c - half], grid[r + half, c + half]])
+                assert abs(grid[r, c] - mean) <= bound + 1e-12
+                exceeded_half |= abs(grid[r, c] - mean) > 0.5 * bound
+        for r in range(0, size + 1, half):
+            for c in range((r + half) % step, size + 1, step):
+                neighbours = [grid[rr, cc] for rr, cc in ((r - half, c), (r + half, c), (r, c - half), (r, c + half))
+                              if 0 <= rr <= size and 0 <= cc <= size]
+                assert len(neighbours) == (4 if 0 < r < size and 0 < c < size else 3)
+                assert abs(grid[r, c] - np.mean(neighbours)) <= bound + 1e-12
+        step, level = half, level + 1
+    assert exceeded_half  # the displacements are really there, not vanishing
+
+
 def test_roughness_controls_fine_scale_variance():
     def fine_variance(roughness):
         grid = midpoint_displacement(7, roughness, 1.0, np.random.default_rng(9))

@@ -1,0 +1,176 @@
+"""Rendering components and camera math; no GL here, so headless simulation can use them.
+
+* :class:`CameraConfig` / :class:`Camera`: perspective or orthographic, a viewport rectangle (so a
+  second camera is a minimap or a split screen), and a controller driven by input in the input stage
+  (``orbit``, ``fly``, ``top``), which keeps camera motion part of the deterministic simulation.
+* :class:`MeshConfig`: a lit box, sphere or plane drawn with the entity's Transform.
+* :class:`Hud`: text that scripts set and the overlay pass draws.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+from pydantic import Field
+
+from engine.config import Color3, ConfigModel, Vec3, Vec4
+from engine.input import InputState
+from engine.spatial import Transform, quat_from_euler, quat_rotate
+from engine.world import World
+
+
+class CameraConfig(ConfigModel):
+    """A camera: projection, viewport rectangle and controller."""
+
+    projection: Literal["perspective", "orthographic"] = Field("perspective")
+    fov: float = Field(60.0, ge=5.0, le=150.0, description="Vertical field of view in degrees (perspective).")
+    ortho_height: float = Field(40.0, gt=0.0, le=1e5, description="World height of the view (orthographic).")
+    near: float = Field(0.1, gt=0.0, le=1e4, description="Near clip distance.")
+    far: float = Field(500.0, gt=0.0, le=1e6, description="Far clip distance.")
+    viewport: Vec4 = Field((0.0, 0.0, 1.0, 1.0),
+                           description="x, y, width, height as fractions of the window (origin bottom-left).")
+    priority: int = Field(0, ge=-100, le=100, description="Views render in ascending priority; the lowest is main.")
+    controller: Literal["none", "orbit", "fly", "top"] = Field("orbit")
+    target: Vec3 = Field((0.0, 0.0, 0.0), description="Orbit / top-view centre.")
+    distance: float = Field(20.0, gt=0.0, le=1e5, description="Orbit distance.")
+    yaw: float = Field(30.0, ge=-360.0, le=360.0, description="Initial yaw in degrees.")
+    pitch: float = Field(-25.0, ge=-89.0, le=89.0, description="Initial pitch in degrees (negative looks down).")
+    move_speed: float = Field(10.0, ge=0.0, le=1000.0, description="Fly speed in metres per second.")
+    look_sensitivity: float = Field(0.2, ge=0.0, le=10.0, description="Degrees per pixel of mouse motion.")
+    border_color: Color3 = Field((0.9, 0.9, 0.9), description="Frame colour drawn around a partial viewport.")
+    enabled: bool = True
+
+
+@dataclass
+class Camera:
+    """Runtime camera: its config and the controller's angles."""
+
+    config: CameraConfig
+    yaw: float = 0.0
+    pitch: float = 0.0
+    distance: float = 20.0
+    target: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+
+def build_camera(cfg: CameraConfig, ctx) -> Camera:
+    cam = Camera(cfg, cfg.yaw, cfg.pitch, cfg.distance, np.array(cfg.target, float))
+    transform = ctx.world.try_get(ctx.entity, Transform)
+    if transform is not None and cfg.controller in ("orbit", "top"):
+        _place(cam, transform)
+    return cam
+
+
+def _place(cam: Camera, t: Transform) -> None:
+    """Set the transform of an orbit / top camera from its angles (float64 trig: deterministic)."""
+    if cam.config.controller == "top":
+        t.rotation = quat_from_euler(0.0, -math.pi / 2, 0.0)
+        t.position = cam.target + np.array([0.0, cam.distance, 0.0])
+        return
+    t.rotation = quat_from_euler(math.radians(cam.yaw), math.radians(cam.pitch), 0.0)
+    back = quat_rotate(t.rotation, np.array([0.0, 0.0, 1.0]))
+    t.position = cam.target + back * cam.distance
+
+
+def camera_controllers(world: World, dt: float) -> None:
+    """Input stage: move cameras from this tick's input (right mouse drag looks; wheel zooms)."""
+    inp = world.resource(InputState)
+    for _, (cam, t) in world.query(Camera, Transform):
+        cfg = cam.config
+        if cfg.controller == "none" or not cfg.enabled:
+            continue
+        looking = inp.is_down("mouse_right")
+        dx, dy = inp.mouse_delta
+        if looking and cfg.controller in ("orbit", "fly"):
+            cam.yaw = (cam.yaw - dx * cfg.look_sensitivity) % 360.0
+            cam.pitch = float(np.clip(cam.pitch + dy * cfg.look_sensitivity, -89.0, 89.0))
+        if cfg.controller == "orbit":
+            cam.distance = float(np.clip(cam.distance * (0.9 ** inp.scroll), cfg.near * 4, cfg.far * 0.5))
+            _place(cam, t)
+        elif cfg.controller == "top":
+            _place(cam, t)
+        elif cfg.controller == "fly":
+            t.rotation = quat_from_euler(math.radians(cam.yaw), math.radians(cam.pitch), 0.0)
+            move = np.array([inp.is_down("d") - inp.is_down("a"), inp.is_down("e") - inp.is_down("q"),
+                             inp.is_down("s") - inp.is_down("w")], float)
+            if move.any():
+                t.position = t.position + quat_rotate(t.rotation, move / np.linalg.norm(move)) * cfg.move_speed * dt
+
+
+# ------------------------------------------------------------------------ matrices
+def perspective(fov_y: float, aspect: float, near: float, far: float) -> np.ndarray:
+    """OpenGL perspective projection (column-vector convention), float64."""
+    f = 1.0 / math.tan(fov_y / 2.0)
+    m = np.zeros((4, 4))
+    m[0, 0] = f / aspect
+    m[1, 1] = f
+    m[2, 2] = (far + near) / (near - far)
+    m[2, 3] = 2.0 * far * near / (near - far)
+    m[3, 2] = -1.0
+    return m
+
+
+def orthographic(height: float, aspect: float, near: float, far: float) -> np.ndarray:
+    """OpenGL orthographic projection of a view ``height`` world units tall."""
+    w, h = height * aspect / 2.0, height / 2.0
+    m = np.eye(4)
+    m[0, 0] = 1.0 / w
+    m[1, 1] = 1.0 / h
+    m[2, 2] = -2.0 / (far - near)
+    m[2, 3] = -(far + near) / (far - near)
+    return m
+
+
+def view_matrix(t: Transform) -> np.ndarray:
+    """World -> camera: the inverse of the camera's rigid transform (scale ignored)."""
+    r = t.rotation_matrix()
+    m = np.eye(4)
+    m[:3, :3] = r.T
+    m[:3, 3] = -r.T @ t.position
+    return m
+
+
+def look_at(eye, target, up=(0.0, 1.0, 0.0)) -> np.ndarray:
+    eye, target, up = (np.asarray(v, float) for v in (eye, target, up))
+    f = target - eye
+    f /= np.linalg.norm(f)
+    s = np.cross(f, up)
+    s /= np.linalg.norm(s)
+    u = np.cross(s, f)
+    m = np.eye(4)
+    m[0, :3], m[1, :3], m[2, :3] = s, u, -f
+    m[:3, 3] = -m[:3, :3] @ eye
+    return m
+
+
+def screen_ray(view: np.ndarray, proj: np.ndarray, ndc_xy) -> tuple[np.ndarray, np.ndarray]:
+    """World-space ray (origin, unit direction) through normalised device coordinates ``ndc_xy``."""
+    inv = np.linalg.inv(proj @ view)
+    x, y = ndc_xy
+    near = inv @ np.array([x, y, -1.0, 1.0])
+    far = inv @ np.array([x, y, 1.0, 1.0])
+    near, far = near[:3] / near[3], far[:3] / far[3]
+    d = far - near
+    return near, d / np.linalg.norm(d)
+
+
+# --------------------------------------------------------------------------- meshes
+class MeshConfig(ConfigModel):
+    """A lit primitive drawn with the entity's Transform (scale sizes it)."""
+
+    shape: Literal["box", "sphere", "plane"] = Field("box", description="Unit box, unit-diameter sphere, unit plane.")
+    color: Color3 = Field((0.7, 0.7, 0.7), description="Albedo (linear RGB).")
+    emissive: float = Field(0.0, ge=0.0, le=100.0, description="Self-illumination multiplier of the albedo.")
+    visible: bool = True
+
+
+@dataclass
+class Hud:
+    """Text drawn over the frame: ``lines`` top-left, ``center`` large in the middle, ``help`` on demand."""
+
+    lines: list[str] = field(default_factory=list)
+    center: str = ""
+    help: list[str] = field(default_factory=list)
+    show_help: bool = False

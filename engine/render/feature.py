@@ -1,0 +1,91 @@
+"""What an effect plugin implements to draw: a :class:`RenderFeature`, and the :class:`View` it draws into.
+
+Per frame the renderer:
+1. calls ``feature.extract(world)`` once (render-extract stage): copy what the passes need out of the
+   simulation state (numpy copies, never references to arrays the simulation keeps mutating);
+2. for every view (main camera, minimap / top view, ...), calls ``feature.add_passes(graph, view, data)``
+   with features ordered by ``phase`` (OPAQUE, TRANSPARENT, OVERLAY) and then by registration order;
+3. compiles and executes the render graph, then tone-maps each view and composites them.
+
+A pass that draws into a view declares it in its setup callback, which also orders it::
+
+    def add_passes(self, graph, view, data):
+        def setup(b):
+            view.color = b.write(view.color)   # HDR rgba16f colour; write returns the new version
+            b.read(view.depth)                 # depth-tested, no depth writes (transparent phase)
+        def execute(pc):
+            fbo = self.renderer.framebuffer(pc.get(view.color), pc.get(view.depth))
+            fbo.use(); ...
+        graph.add_pass(f"{self.name}.{view.name}", setup, execute)
+
+Opaque passes write both ``view.color`` and ``view.depth``.  Persistent GPU data (an impostor atlas, a
+height-field texture) is owned by the feature and imported with ``graph.import_resource`` when another
+pass reads it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from engine.render.graph import RenderGraph, ResourceHandle
+    from engine.render.renderer import Renderer
+    from engine.world import World
+
+OPAQUE = 0
+TRANSPARENT = 1
+OVERLAY = 2
+
+
+@dataclass
+class View:
+    """One camera's image this frame: matrices (float32, column-vector convention) and graph handles."""
+
+    name: str
+    width: int
+    height: int
+    view: np.ndarray  # 4x4 world -> camera
+    proj: np.ndarray  # 4x4 camera -> clip
+    camera_pos: np.ndarray  # (3,)
+    camera_forward: np.ndarray  # (3,) unit
+    near: float
+    far: float
+    fov_y: float  # radians (perspective); 0 for orthographic
+    ortho: bool
+    color: ResourceHandle | None = None
+    depth: ResourceHandle | None = None
+    is_main: bool = True
+    camera_entity: int = 0
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def view_proj(self) -> np.ndarray:
+        return (self.proj @ self.view).astype(np.float32)
+
+    def mvp_bytes(self) -> bytes:
+        """``view_proj`` as bytes for a ``mat4`` uniform (moderngl expects column-major)."""
+        return self.view_proj.T.astype(np.float32).tobytes()
+
+
+class RenderFeature:
+    """Base class of a plugin's render passes; GL objects are created lazily and released in ``release``."""
+
+    name: str = "feature"
+    phase: int = OPAQUE
+
+    def __init__(self, renderer: Renderer) -> None:
+        self.renderer = renderer
+        self.ctx = renderer.ctx
+
+    def extract(self, world: World) -> Any:
+        """Copy what the passes need from the world (called once per frame)."""
+        return None
+
+    def add_passes(self, graph: RenderGraph, view: View, data: Any) -> None:
+        """Declare this feature's passes for ``view``."""
+
+    def release(self) -> None:
+        """Free GL objects."""

@@ -1,0 +1,446 @@
+"""The engine's own render features: sky, terrain, lit meshes, tone mapping, composition, HUD text.
+
+Meshes are drawn instanced, one draw call per primitive shape; the terrain mesh is uploaded once per
+height field and drawn with a colour ramp.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import TYPE_CHECKING, Any
+
+import moderngl
+import numpy as np
+
+from engine.builtin import Terrain
+from engine.render.components import Hud, MeshConfig
+from engine.render.feature import OPAQUE, OVERLAY, RenderFeature, View
+from engine.render.graph import TextureDesc
+from engine.spatial import Transform
+
+if TYPE_CHECKING:
+    from engine.render.renderer import Renderer
+
+SHADERS = __import__("pathlib").Path(__file__).parent / "shaders"
+
+
+def builtin_features():
+    return [SkyFeature, TerrainFeature, MeshFeature, HudFeature]
+
+
+def set_uniforms(prog: moderngl.Program, **values: Any) -> None:
+    """Set the uniforms that the program really uses (the compiler drops unused ones)."""
+    for name, value in values.items():
+        if name in prog:
+            member = prog[name]
+            if isinstance(value, np.ndarray):
+                member.write(value.astype(np.float32).tobytes() if value.dtype != np.int32 else value.tobytes())
+            else:
+                member.value = value
+
+
+def lighting_uniforms(renderer: Renderer, view: View) -> dict[str, Any]:
+    s = renderer.settings
+    return dict(view_proj=view.view_proj.T.copy(), sun_dir=tuple(renderer.sun_direction),
+                sun_color=tuple(renderer.sun_color), ambient=renderer.ambient, sky_top=tuple(s.sky_top),
+                sky_horizon=tuple(s.sky_horizon), camera_pos=tuple(view.camera_pos), fog_density=s.fog_density)
+
+
+def opaque_setup(view: View):
+    """Setup callback of an opaque pass: writes the view's colour and depth."""
+
+    def setup(b):
+        view.color = b.write(view.color)
+        view.depth = b.write(view.depth)
+
+    return setup
+
+
+# ---------------------------------------------------------------------------- sky
+class SkyFeature(RenderFeature):
+    name = "sky"
+    phase = OPAQUE
+
+    def add_passes(self, graph, view: View, data) -> None:
+        def setup(b):
+            view.color = b.write(view.color)
+
+        def execute(pc):
+            prog = self._program()
+            fbo = self.renderer.framebuffer(pc.get(view.color))
+            fbo.use()
+            self.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
+            s = self.renderer.settings
+            inv = np.linalg.inv(view.view_proj.astype(np.float64)).astype(np.float32)
+            set_uniforms(prog, inv_view_proj=inv.T.copy(), camera_pos=tuple(view.camera_pos),
+                         sky_top=tuple(s.sky_top), sky_horizon=tuple(s.sky_horizon),
+                         sun_dir=tuple(self.renderer.sun_direction), sun_color=tuple(self.renderer.sun_color),
+                         ortho=view.ortho, camera_forward=tuple(view.camera_forward))
+            self._vao.render(moderngl.TRIANGLES, vertices=3)
+
+        graph.add_pass(f"sky.{view.name}", setup, execute)
+
+    def _program(self) -> moderngl.Program:
+        if not hasattr(self, "_vao"):
+            prog = self.renderer.program((SHADERS / "fullscreen.vert").read_text(), (SHADERS / "sky.frag").read_text())
+            self._vao = self.ctx.vertex_array(prog, [])
+            self._prog = prog
+        return self._prog
+
+
+# ------------------------------------------------------------------------ terrain
+@dataclass
+class _TerrainMesh:
+    key: tuple
+    vao: moderngl.VertexArray
+    vbo: moderngl.Buffer
+    ibo: moderngl.Buffer
+    height_range: tuple[float, float]
+
+    def release(self) -> None:
+        for obj in (self.vao, self.vbo, self.ibo):
+            obj.release()
+
+
+def terrain_mesh_arrays(field) -> tuple[np.ndarray, np.ndarray]:
+    """Interleaved position+normal vertices (float32) and triangle indices (uint32) of a height field."""
+    h = np.asarray(field.heights, np.float64)
+    rows, cols = h.shape
+    xs = field.origin[0] + np.arange(cols) * field.spacing
+    zs = field.origin[1] + np.arange(rows) * field.spacing
+    gx, gz = np.meshgrid(xs, zs)
+    dz, dx = np.gradient(h, field.spacing)
+    normals = np.stack([-dx, np.ones_like(h), -dz], axis=-1)
+    normals /= np.linalg.norm(normals, axis=-1, keepdims=True)
+    verts = np.concatenate([np.stack([gx, h, gz], axis=-1), normals], axis=-1).reshape(-1, 6).astype(np.float32)
+    r, c = np.meshgrid(np.arange(rows - 1), np.arange(cols - 1), indexing="ij")
+    i0 = (r * cols + c).ravel()
+    quads = np.stack([i0, i0 + cols, i0 + 1, i0 + 1, i0 + cols, i0 + cols + 1], axis=-1)
+    return verts, quads.astype(np.uint32).ravel()
+
+
+class TerrainFeature(RenderFeature):
+    name = "terrain"
+    phase = OPAQUE
+
+    def __init__(self, renderer: Renderer) -> None:
+        super().__init__(renderer)
+        self._meshes: dict[int, _TerrainMesh] = {}
+
+    def extract(self, world) -> list:
+        out = []
+        for entity, (terrain, t) in world.query(Terrain, Transform):
+            key = (id(terrain.field.heights), terrain.field.heights.shape, terrain.field.spacing)
+            out.append((entity, key, terrain, t.matrix().astype(np.float32)))
+        return out
+
+    def _mesh(self, entity: int, key: tuple, terrain: Terrain) -> _TerrainMesh:
+        mesh = self._meshes.get(entity)
+        if mesh is not None and mesh.key == key:
+            return mesh
+        if mesh is not None:
+            mesh.release()
+        prog = self._program()
+        verts, idx = terrain_mesh_arrays(terrain.field)
+        vbo, ibo = self.ctx.buffer(verts.tobytes()), self.ctx.buffer(idx.tobytes())
+        vao = self.ctx.vertex_array(prog, [(vbo, "3f 3f", "in_position", "in_normal")], ibo)
+        h = terrain.field.heights
+        mesh = _TerrainMesh(key, vao, vbo, ibo, (float(h.min()), float(h.max())))
+        self._meshes[entity] = mesh
+        return mesh
+
+    def _program(self) -> moderngl.Program:
+        return self.renderer.load_program(SHADERS, "terrain")
+
+    def add_passes(self, graph, view: View, data) -> None:
+        if not data:
+            return
+
+        def execute(pc):
+            fbo = self.renderer.framebuffer(pc.get(view.color), pc.get(view.depth))
+            fbo.use()
+            self.ctx.enable(moderngl.DEPTH_TEST)
+            self.ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
+            prog = self._program()
+            set_uniforms(prog, **lighting_uniforms(self.renderer, view))
+            for entity, key, terrain, model in data:
+                mesh = self._mesh(entity, key, terrain)
+                colors = np.zeros((8, 3), np.float32)
+                ramp = np.array(terrain.config.colors, np.float32)
+                colors[: len(ramp)] = ramp
+                set_uniforms(prog, model=model.T.copy(), ramp=colors, ramp_count=len(ramp),
+                             height_range=mesh.height_range)
+                mesh.vao.render(moderngl.TRIANGLES)
+
+        graph.add_pass(f"terrain.{view.name}", opaque_setup(view), execute)
+
+    def release(self) -> None:
+        for mesh in self._meshes.values():
+            mesh.release()
+        self._meshes.clear()
+
+
+# ------------------------------------------------------------------------- meshes
+@lru_cache(maxsize=None)
+def primitive(shape: str) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (position, normal; float32) and indices (uint32) of a unit primitive."""
+    if shape == "box":
+        faces = []
+        for axis in range(3):
+            for sign in (-1.0, 1.0):
+                n = np.zeros(3)
+                n[axis] = sign
+                u, v = np.zeros(3), np.zeros(3)
+                u[(axis + 1) % 3], v[(axis + 2) % 3] = 1.0, 1.0
+                corners = [n * 0.5 + (a * u + b * v) * 0.5 for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
+                faces.append([np.concatenate([c, n]) for c in corners])
+        verts = np.array(faces, np.float32).reshape(-1, 6)
+        base = np.arange(6)[:, None] * 4
+        idx = (base + np.array([0, 1, 2, 0, 2, 3])).ravel()
+        return verts, idx.astype(np.uint32)
+    if shape == "sphere":
+        stacks, slices = 12, 20
+        phi = np.linspace(0, np.pi, stacks + 1)[:, None]
+        theta = np.linspace(0, 2 * np.pi, slices + 1)[None, :]
+        n = np.stack([np.sin(phi) * np.cos(theta), np.cos(phi) * np.ones_like(theta),
+                      np.sin(phi) * np.sin(theta)], axis=-1).reshape(-1, 3)
+        verts = np.concatenate([n * 0.5, n], axis=1).astype(np.float32)
+        r, c = np.meshgrid(np.arange(stacks), np.arange(slices), indexing="ij")
+        i0 = (r * (slices + 1) + c).ravel()
+        idx = np.stack([i0, i0 + 1, i0 + slices + 1, i0 + 1, i0 + slices + 2, i0 + slices + 1], -1)
+        return verts, idx.astype(np.uint32).ravel()
+    if shape == "plane":
+        verts = np.array([[-0.5, 0, -0.5, 0, 1, 0], [0.5, 0, -0.5, 0, 1, 0], [0.5, 0, 0.5, 0, 1, 0],
+                          [-0.5, 0, 0.5, 0, 1, 0]], np.float32)
+        return verts, np.array([0, 2, 1, 0, 3, 2], np.uint32)
+    raise ValueError(f"unknown primitive '{shape}' (box, sphere, plane)")
+
+
+class MeshFeature(RenderFeature):
+    """Every entity with Transform + MeshConfig, instanced: one draw call per shape."""
+
+    name = "meshes"
+    phase = OPAQUE
+    INSTANCE_FLOATS = 20
+
+    def __init__(self, renderer: Renderer) -> None:
+        super().__init__(renderer)
+        self._geometry: dict[str, tuple] = {}
+        self._instances: dict[str, moderngl.Buffer] = {}
+
+    def extract(self, world) -> dict[str, np.ndarray]:
+        groups: dict[str, list] = {}
+        for _, (mesh, t) in world.query(MeshConfig, Transform):
+            if mesh.visible:
+                groups.setdefault(mesh.shape, []).append((t, mesh))
+        out = {}
+        for shape, items in groups.items():
+            data = np.empty((len(items), self.INSTANCE_FLOATS), np.float32)
+            data[:, :16] = np.stack([t.matrix().T.ravel() for t, _ in items])
+            data[:, 16:19] = [m.color for _, m in items]
+            data[:, 19] = [m.emissive for _, m in items]
+            out[shape] = data
+        return out
+
+    def _vao(self, shape: str, count: int) -> moderngl.VertexArray:
+        buf = self._instances.get(shape)
+        needed = count * self.INSTANCE_FLOATS * 4
+        if buf is None or buf.size < needed:
+            if buf is not None:
+                buf.release()
+                self._geometry.pop(shape)[0].release()
+            buf = self.ctx.buffer(reserve=max(needed, 64 * self.INSTANCE_FLOATS * 4))
+            self._instances[shape] = buf
+        if shape not in self._geometry:
+            verts, idx = primitive(shape)
+            vbo, ibo = self.ctx.buffer(verts.tobytes()), self.ctx.buffer(idx.tobytes())
+            prog = self.renderer.load_program(SHADERS, "mesh")
+            vao = self.ctx.vertex_array(prog, [(vbo, "3f 3f", "in_position", "in_normal"),
+                                               (buf, "4f 4f 4f 4f 4f/i", "m0", "m1", "m2", "m3", "in_color")], ibo)
+            self._geometry[shape] = (vao, vbo, ibo)
+        return self._geometry[shape][0]
+
+    def add_passes(self, graph, view: View, data) -> None:
+        if not data:
+            return
+
+        def execute(pc):
+            fbo = self.renderer.framebuffer(pc.get(view.color), pc.get(view.depth))
+            fbo.use()
+            self.ctx.enable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
+            self.ctx.disable(moderngl.BLEND)
+            prog = self.renderer.load_program(SHADERS, "mesh")
+            set_uniforms(prog, **lighting_uniforms(self.renderer, view))
+            for shape, inst in data.items():
+                vao = self._vao(shape, len(inst))
+                self._instances[shape].write(inst.tobytes())
+                vao.render(moderngl.TRIANGLES, instances=len(inst))
+            self.ctx.disable(moderngl.CULL_FACE)
+
+        graph.add_pass(f"meshes.{view.name}", opaque_setup(view), execute)
+
+    def release(self) -> None:
+        for vao, vbo, ibo in self._geometry.values():
+            vao.release(), vbo.release(), ibo.release()
+        for buf in self._instances.values():
+            buf.release()
+        self._geometry.clear()
+        self._instances.clear()
+
+
+# ----------------------------------------------------------- tone map, composite
+def _fullscreen(renderer: Renderer, frag: str) -> moderngl.VertexArray:
+    cache = renderer.__dict__.setdefault("_fullscreen_vaos", {})
+    vao = cache.get(frag)
+    if vao is None:
+        prog = renderer.program((SHADERS / "fullscreen.vert").read_text(), (SHADERS / frag).read_text())
+        vao = renderer.ctx.vertex_array(prog, [])
+        cache[frag] = vao
+    return vao
+
+
+def tonemap_execute(renderer: Renderer, pc, view: View, ldr_handle) -> None:
+    ctx = renderer.ctx
+    fbo = renderer.framebuffer(pc.get(ldr_handle))
+    fbo.use()
+    ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
+    vao = _fullscreen(renderer, "tonemap.frag")
+    pc.get(view.color).use(0)
+    set_uniforms(vao.program, hdr=0, exposure=renderer.settings.exposure)
+    vao.render(moderngl.TRIANGLES, vertices=3)
+
+
+def composite_execute(renderer: Renderer, pc, final_handle, ldr_views) -> None:
+    ctx = renderer.ctx
+    fbo = renderer.framebuffer(pc.get(final_handle))
+    fbo.use()
+    ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
+    fbo.clear(0.0, 0.0, 0.0, 1.0)
+    vao = _fullscreen(renderer, "blit.frag")
+    for view, handles in ldr_views:
+        x, y, w, h = view.extra["rect"]
+        if (w, h) != (renderer.width, renderer.height):
+            fbo.clear(*view.extra["border"], 1.0, viewport=(x - 2, y - 2, w + 4, h + 4))
+        fbo.viewport = (x, y, w, h)
+        pc.get(handles["ldr"]).use(0)
+        set_uniforms(vao.program, image=0)
+        vao.render(moderngl.TRIANGLES, vertices=3)
+    fbo.viewport = (0, 0, renderer.width, renderer.height)
+
+
+# --------------------------------------------------------------------------- text
+def text_image(lines: list[str], size: int, color=(255, 255, 255), background=(0, 0, 0, 150), pad: int = 6):
+    """RGBA PIL image of ``lines`` on a translucent box (Pillow's built-in font)."""
+    from PIL import Image, ImageDraw, ImageFont
+
+    font = _font(size)
+    probe = ImageDraw.Draw(Image.new("RGBA", (1, 1)))
+    widths, heights = [], []
+    for line in lines:
+        l, t, r, b = probe.textbbox((0, 0), line or " ", font=font)
+        widths.append(r - l)
+        heights.append(max(b - t, size))
+    w = max(widths) + 2 * pad
+    h = sum(int(hh * 1.25) for hh in heights) + 2 * pad
+    img = Image.new("RGBA", (max(w, 1), max(h, 1)), background)
+    draw = ImageDraw.Draw(img)
+    y = pad
+    for line, hh in zip(lines, heights):
+        draw.text((pad, y), line, font=font, fill=color)
+        y += int(hh * 1.25)
+    return img
+
+
+@lru_cache(maxsize=8)
+def _font(size: int):
+    from PIL import ImageFont
+
+    try:
+        return ImageFont.load_default(size=size)
+    except TypeError:  # Pillow < 10.1: fixed-size bitmap font
+        return ImageFont.load_default()
+
+
+class HudFeature(RenderFeature):
+    """Draws the Hud resource (and the profiler when toggled) over the composited frame."""
+
+    name = "hud"
+    phase = OVERLAY
+
+    def __init__(self, renderer: Renderer) -> None:
+        super().__init__(renderer)
+        self._textures: dict[tuple, moderngl.Texture] = {}
+
+    def extract(self, world) -> list[tuple[str, tuple, int]]:
+        items: list[tuple[str, tuple, int]] = []
+        hud = world.try_resource(Hud)
+        if hud is not None:
+            if hud.lines:
+                items.append(("top_left", tuple(hud.lines), 16))
+            if hud.center:
+                items.append(("center", tuple(hud.center.split("\n")), 34))
+            if hud.show_help and hud.help:
+                items.append(("help", tuple(hud.help), 16))
+        if self.renderer.show_profiler:
+            t = self.renderer.timer
+            rows = [f"{name:<28s}{ms:7.2f} ms" for name, ms in sorted(t.last.items(), key=lambda kv: -kv[1])[:14]]
+            items.append(("top_right", ("profiler (F3)", *rows), 13))
+        return items
+
+    def _texture(self, lines: tuple, size: int) -> moderngl.Texture:
+        key = (lines, size)
+        tex = self._textures.get(key)
+        if tex is None:
+            if len(self._textures) > 32:
+                for old in self._textures.values():
+                    old.release()
+                self._textures.clear()
+            img = text_image(list(lines), size)
+            tex = self.ctx.texture(img.size, 4, img.tobytes())
+            tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            self._textures[key] = tex
+        return tex
+
+    def add_passes(self, graph, view: View, data) -> None:
+        if not data:
+            return
+
+        def setup(b):
+            view.color = b.write(view.color)
+
+        def execute(pc):
+            r = self.renderer
+            fbo = r.framebuffer(pc.get(view.color))
+            fbo.use()
+            self.ctx.disable(moderngl.DEPTH_TEST)
+            self.ctx.enable(moderngl.BLEND)
+            self.ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
+            prog = r.program((SHADERS / "sprite.vert").read_text(), (SHADERS / "sprite.frag").read_text())
+            vao = r.__dict__.setdefault("_sprite_vao", self.ctx.vertex_array(prog, []))
+            for where, lines, size in data:
+                tex = self._texture(lines, size)
+                w, h = tex.size
+                x, y = _anchor(where, w, h, r.width, r.height)
+                tex.use(0)
+                set_uniforms(prog, image=0, rect=(x, y, w, h), screen=(r.width, r.height))
+                vao.render(moderngl.TRIANGLE_STRIP, vertices=4)
+            self.ctx.disable(moderngl.BLEND)
+
+        graph.add_pass("hud", setup, execute)
+
+    def release(self) -> None:
+        for tex in self._textures.values():
+            tex.release()
+        self._textures.clear()
+
+
+def _anchor(where: str, w: int, h: int, sw: int, sh: int) -> tuple[int, int]:
+    margin = 8
+    if where == "top_left":
+        return margin, sh - h - margin
+    if where == "top_right":
+        return sw - w - margin, sh - h - margin
+    if where == "center":
+        return (sw - w) // 2, (sh - h) // 2
+    return (sw - w) // 2, margin  # help: bottom centre

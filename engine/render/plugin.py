@@ -1,0 +1,68 @@
+"""The rendering core plugin: Camera and Mesh components, camera controllers, the HUD resource, and the
+render-extract / render systems that drive an attached :class:`~engine.render.renderer.Renderer`.
+
+Nothing here imports GL: the renderer is created by the front end (window or headless) only.
+"""
+
+from __future__ import annotations
+
+from engine.registry import Registry
+from engine.render.components import CameraConfig, Hud, MeshConfig, build_camera, camera_controllers
+from engine.schedule import Stage
+from engine.world import World
+
+
+def _renderer(world: World):
+    from engine.app import App
+
+    app = world.try_resource(App)
+    return None if app is None else app.renderer
+
+
+def extract_system(world: World, dt: float) -> None:
+    """Render-extract stage: the renderer copies what its passes need (the world is only read)."""
+    renderer = _renderer(world)
+    if renderer is not None:
+        renderer.extract(world)
+
+
+def draw_system(world: World, dt: float) -> None:
+    """Render stage: execute the render graph."""
+    renderer = _renderer(world)
+    if renderer is not None:
+        renderer.draw()
+
+
+def _mesh_command(world: World, entity: int, **values) -> MeshConfig:
+    """``ctx.call("render.mesh", shape="box", color=(r, g, b))``: a validated Mesh component."""
+    values = {k: list(v) if isinstance(v, tuple) else v for k, v in values.items()}
+    return MeshConfig.model_validate(values)
+
+
+def _set_hud(world: World, entity: int, lines=None, center=None, help=None, show_help=None) -> None:
+    hud = world.resource(Hud)
+    if lines is not None:
+        hud.lines = list(lines)
+    if center is not None:
+        hud.center = str(center)
+    if help is not None:
+        hud.help = list(help)
+    if show_help is not None:
+        hud.show_help = bool(show_help)
+
+
+class RenderPlugin:
+    name = "render"
+
+    def build(self, registry: Registry) -> None:
+        registry.add_component("Camera", CameraConfig, build_camera)
+        registry.add_component("Mesh", MeshConfig)
+        registry.add_system(camera_controllers, Stage.INPUT, name="render.camera_controllers", after=("core.input",))
+        registry.add_system(extract_system, Stage.RENDER_EXTRACT, name="render.extract")
+        registry.add_system(draw_system, Stage.RENDER, name="render.draw")
+        registry.add_command("render.mesh", _mesh_command)
+        registry.add_command("render.hud", _set_hud)
+        registry.on_world(lambda world: world.insert_resource(Hud()))
+
+
+plugin = RenderPlugin()

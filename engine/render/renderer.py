@@ -1,0 +1,364 @@
+"""The renderer: views from cameras, the render graph per frame, HDR targets, tone mapping, composition.
+
+One rendering path for both kinds of context (a pyglet window or headless EGL): every view renders
+into pooled HDR (rgba16f) colour + depth targets, is tone-mapped into an LDR target, and the views are
+composited into the persistent ``final`` image.  A window then blits ``final`` to the screen; headless
+runs read it back for screenshots.  Rendering only reads the world (render-extract copies what passes
+need), so a run with or without a renderer ends with the same state hash.
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+import time
+from dataclasses import replace
+from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import moderngl
+import numpy as np
+
+from engine.render.components import Camera, Hud, look_at, orthographic, perspective, view_matrix
+from engine.render.feature import OPAQUE, OVERLAY, TRANSPARENT, RenderFeature, View
+from engine.render.graph import RenderGraph, ResourcePool, TextureDesc
+from engine.spatial import Transform
+
+if TYPE_CHECKING:
+    from engine.app import App
+    from engine.world import World
+
+log = logging.getLogger("engine.render")
+SHADER_DIR = Path(__file__).parent / "shaders"
+
+
+class PassTimer:
+    """Per-pass timings: GL timer queries when profiling (exact GPU time), CPU time otherwise."""
+
+    def __init__(self, ctx: moderngl.Context) -> None:
+        self.ctx = ctx
+        self.enabled = False
+        self.gpu = True
+        self.last: dict[str, float] = {}  # pass -> milliseconds (last frame)
+        self.totals: dict[str, float] = {}
+        self.frames = 0
+
+    def wrap(self, name: str, execute: Callable[[Any], None]) -> Callable[[Any], None]:
+        def timed(pc: Any) -> None:
+            if self.enabled and self.gpu:
+                try:
+                    query = self.ctx.query(time=True)
+                    with query:
+                        execute(pc)
+                    ms = query.elapsed / 1e6
+                except (moderngl.Error, AttributeError):
+                    self.gpu = False
+                    ms = self._cpu(execute, pc)
+            else:
+                ms = self._cpu(execute, pc)
+            self.last[name] = ms
+            self.totals[name] = self.totals.get(name, 0.0) + ms
+
+        return timed
+
+    def _cpu(self, execute: Callable[[Any], None], pc: Any) -> float:
+        start = time.perf_counter()
+        execute(pc)
+        if self.enabled:
+            self.ctx.finish()
+        return (time.perf_counter() - start) * 1e3
+
+    def report(self) -> str:
+        if not self.frames:
+            return "no frames rendered"
+        kind = "GPU timer queries" if (self.enabled and self.gpu) else "CPU time"
+        rows = sorted(self.totals.items(), key=lambda kv: -kv[1])
+        lines = [f"per-pass time, mean over {self.frames} frame(s) ({kind}):"]
+        lines += [f"  {name:<40s} {total / self.frames:8.3f} ms" for name, total in rows]
+        return "\n".join(lines)
+
+
+class _TimedGraph:
+    """The graph as features see it: add_pass wraps each execute callback with the timer."""
+
+    def __init__(self, graph: RenderGraph, timer: PassTimer) -> None:
+        self._graph = graph
+        self._timer = timer
+
+    def add_pass(self, name: str, setup, execute, side_effect: bool = False) -> None:
+        self._graph.add_pass(name, setup, self._timer.wrap(name, execute), side_effect=side_effect)
+
+    def __getattr__(self, item: str) -> Any:
+        return getattr(self._graph, item)
+
+
+class Renderer:
+    """Draws an :class:`~engine.app.App`'s world with the registered render features."""
+
+    def __init__(self, app: App, ctx: moderngl.Context, width: int, height: int,
+                 screen: moderngl.Framebuffer | None = None) -> None:
+        self.app = app
+        self.ctx = ctx
+        self.screen = screen
+        self.settings = app.config.render
+        self.width, self.height = int(width), int(height)
+        self.time = 0.0
+        self.frame_index = 0
+        self.sun_direction = _unit(np.array(self.settings.sun_direction, float)).astype(np.float32)
+        self.sun_color = np.array(self.settings.sun_color, np.float32)
+        self.ambient = float(self.settings.ambient)
+        self._programs: dict[tuple, moderngl.Program] = {}
+        self._framebuffers: dict[tuple, moderngl.Framebuffer] = {}
+        self.quad_buffer = ctx.buffer(np.array([-1, -1, 1, -1, -1, 1, 1, 1], np.float32).tobytes())
+        self.graph = RenderGraph(ResourcePool(self._make_resource, self._free_resource))
+        self.timer = PassTimer(ctx)
+        self.views: list[View] = []
+        self.show_profiler = False
+        self._data: list[Any] = []
+        self._final: moderngl.Texture | None = None
+        self._final_fbo: moderngl.Framebuffer | None = None
+        self._resize_final()
+        from engine.render.passes import builtin_features
+
+        factories = list(builtin_features()) + list(app.registry.render_features)
+        self.features: list[RenderFeature] = [f(self) for f in factories]
+        self._ordered = sorted(enumerate(self.features), key=lambda kv: (kv[1].phase, kv[0]))
+        app.renderer = self
+
+    # ------------------------------------------------------------------ services
+    def program(self, vertex_shader: str, fragment_shader: str, geometry_shader: str | None = None,
+                varyings: tuple[str, ...] = ()) -> moderngl.Program:
+        key = (vertex_shader, fragment_shader, geometry_shader, varyings)
+        prog = self._programs.get(key)
+        if prog is None:
+            prog = self.ctx.program(vertex_shader=vertex_shader, fragment_shader=fragment_shader,
+                                    geometry_shader=geometry_shader, varyings=varyings or ())
+            self._programs[key] = prog
+        return prog
+
+    def load_program(self, directory: str | Path, name: str) -> moderngl.Program:
+        """``name.vert`` + ``name.frag`` (+ ``name.geom``) from ``directory``, compiled once."""
+        directory = Path(directory)
+        geom = directory / f"{name}.geom"
+        try:
+            return self.program(_source(directory / f"{name}.vert"), _source(directory / f"{name}.frag"),
+                                _source(geom) if geom.exists() else None)
+        except moderngl.Error as exc:
+            raise RuntimeError(f"shader '{name}' in {directory} failed to compile:\n{exc}") from None
+
+    def framebuffer(self, color: moderngl.Texture | list | None, depth: moderngl.Texture | None = None
+                    ) -> moderngl.Framebuffer:
+        colors = [] if color is None else (list(color) if isinstance(color, (list, tuple)) else [color])
+        key = (tuple(c.glo for c in colors), depth.glo if depth is not None else 0)
+        fbo = self._framebuffers.get(key)
+        if fbo is None:
+            fbo = self.ctx.framebuffer(color_attachments=colors, depth_attachment=depth)
+            self._framebuffers[key] = fbo
+        return fbo
+
+    def _make_resource(self, desc: TextureDesc) -> moderngl.Texture:
+        size = (desc.width, desc.height)
+        if desc.is_depth:
+            return self.ctx.depth_texture(size)
+        tex = self.ctx.texture(size, desc.components, dtype=desc.dtype)
+        tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        tex.repeat_x = tex.repeat_y = False
+        return tex
+
+    def _free_resource(self, tex: moderngl.Texture) -> None:
+        for key in [k for k in self._framebuffers if tex.glo in k[0] or tex.glo == k[1]]:
+            self._framebuffers.pop(key).release()
+        tex.release()
+
+    # ---------------------------------------------------------------- frame size
+    def resize(self, width: int, height: int) -> None:
+        """Resize the targets (the pool drops the old sizes as they go idle)."""
+        width, height = max(1, int(width)), max(1, int(height))
+        if (width, height) != (self.width, self.height):
+            self.width, self.height = width, height
+            self._resize_final()
+            self.graph.pool.trim(0)
+
+    def _resize_final(self) -> None:
+        if self._final is not None:
+            self._free_resource(self._final)
+        self._final = self.ctx.texture((self.width, self.height), 4)
+        self._final_fbo = self.framebuffer(self._final)
+
+    @property
+    def final_texture(self) -> moderngl.Texture:
+        return self._final
+
+    # --------------------------------------------------------------------- views
+    def build_views(self, world: World) -> list[View]:
+        cams = []
+        for entity, (cam, t) in world.query(Camera, Transform):
+            if cam.config.enabled:
+                cams.append((cam.config.priority, entity, cam, t))
+        cams.sort(key=lambda c: (c[0], c[1]))
+        views = []
+        for i, (_, entity, cam, t) in enumerate(cams):
+            views.append(self._view_for(f"view{i}", cam, view_matrix(t), t.position, t.forward(), entity, i == 0))
+        if not views:
+            eye = np.array([18.0, 14.0, 18.0])
+            cam = Camera(_default_camera_config())
+            fwd = _unit(-eye)
+            views.append(self._view_for("view0", cam, look_at(eye, (0, 0, 0)), eye, fwd, 0, True))
+        return views
+
+    def _view_for(self, name: str, cam: Camera, view: np.ndarray, pos, fwd, entity: int, main: bool) -> View:
+        cfg = cam.config
+        vx, vy, vw, vh = cfg.viewport
+        w = max(1, int(round(vw * self.width)))
+        h = max(1, int(round(vh * self.height)))
+        aspect = w / h
+        if cfg.projection == "perspective":
+            proj = perspective(np.radians(cfg.fov), aspect, cfg.near, cfg.far)
+            fov = float(np.radians(cfg.fov))
+        else:
+            proj = orthographic(cfg.ortho_height, aspect, cfg.near, cfg.far)
+            fov = 0.0
+        v = View(name, w, h, view.astype(np.float32), proj.astype(np.float32), np.asarray(pos, np.float32),
+                 np.asarray(fwd, np.float32), cfg.near, cfg.far, fov, cfg.projection == "orthographic",
+                 is_main=main, camera_entity=entity)
+        v.extra["rect"] = (int(round(vx * self.width)), int(round(vy * self.height)), w, h)
+        v.extra["border"] = tuple(cfg.border_color)
+        return v
+
+    # --------------------------------------------------------------------- frame
+    def render(self, world: World) -> None:
+        """Extract then draw (both stages at once; the app's systems call them separately)."""
+        self.extract(world)
+        self.draw()
+
+    def extract(self, world: World) -> None:
+        """Render-extract stage: copy what the passes need and build the views (reads the world only)."""
+        self.time = world.tick * self.app.dt
+        self._data = [f.extract(world) for f in self.features]
+        self.views = self.build_views(world)
+
+    def declare(self) -> RenderGraph:
+        """Declare every pass of every view for the extracted frame (no GL work)."""
+        data = self._data
+        graph = self.graph
+        graph.reset()
+        timed = _TimedGraph(graph, self.timer)
+        final = graph.import_resource("final", self._final, TextureDesc(self.width, self.height, "rgba8"))
+        ldr_views = []
+        for view in self.views:
+            self._declare_view_targets(timed, view)
+            for index, feature in self._ordered:
+                if feature.phase in (OPAQUE, TRANSPARENT):
+                    feature.add_passes(timed, view, data[index])
+            ldr_views.append(self._declare_tonemap(timed, view))
+        screen = replace(self.views[0], name="screen", width=self.width, height=self.height,
+                         color=self._declare_composite(timed, final, ldr_views), depth=None, extra={})
+        for index, feature in self._ordered:
+            if feature.phase == OVERLAY:
+                feature.add_passes(timed, screen, data[index])
+        return graph
+
+    def draw(self) -> None:
+        """Render stage: declare, compile (cached) and execute the graph; present in a window."""
+        self.declare().execute()
+        self.timer.frames += 1
+        self.frame_index += 1
+        if self.screen is not None:
+            self.ctx.copy_framebuffer(self.screen, self._final_fbo)
+
+    def _declare_view_targets(self, graph, view: View) -> None:
+        def setup(b):
+            view.color = b.write(b.create(f"{view.name}.hdr", TextureDesc(view.width, view.height, "rgba16f")))
+            view.depth = b.write(b.create(f"{view.name}.depth", TextureDesc(view.width, view.height, "depth24")))
+
+        def execute(pc):
+            fbo = self.framebuffer(pc.get(view.color), pc.get(view.depth))
+            fbo.use()
+            fbo.clear(*self.settings.sky_horizon, 1.0, depth=1.0)
+
+        graph.add_pass(f"clear.{view.name}", setup, execute)
+
+    def _declare_tonemap(self, graph, view: View):
+        from engine.render.passes import tonemap_execute
+
+        handles = {}
+
+        def setup(b):
+            b.read(view.color)
+            handles["ldr"] = b.write(b.create(f"{view.name}.ldr", TextureDesc(view.width, view.height, "rgba8")))
+
+        graph.add_pass(f"tonemap.{view.name}", setup, lambda pc: tonemap_execute(self, pc, view, handles["ldr"]))
+        return view, handles
+
+    def _declare_composite(self, graph, final, ldr_views):
+        from engine.render.passes import composite_execute
+
+        out = {}
+
+        def setup(b):
+            for _, handles in ldr_views:
+                b.read(handles["ldr"])
+            out["final"] = b.write(final)
+
+        graph.add_pass("composite", setup, lambda pc: composite_execute(self, pc, out["final"], ldr_views),
+                       side_effect=True)
+        return out["final"]
+
+    # ----------------------------------------------------------------- pictures
+    def read_image(self):
+        """The last frame as a PIL image (top row first)."""
+        from PIL import Image
+
+        raw = self._final_fbo.read(components=4)
+        img = Image.frombytes("RGBA", (self.width, self.height), raw).transpose(Image.FLIP_TOP_BOTTOM)
+        return img.convert("RGB")
+
+    def save_screenshot(self, path: str | Path) -> Path:
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        self.read_image().save(path)
+        return path
+
+    def release(self) -> None:
+        for f in self.features:
+            f.release()
+        self.graph.pool.clear()
+        for fbo in self._framebuffers.values():
+            fbo.release()
+        self._framebuffers.clear()
+        for prog in self._programs.values():
+            prog.release()
+        self._programs.clear()
+
+
+_INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.M)
+
+
+def _source(path: Path, depth: int = 0) -> str:
+    """Shader text with ``#include "file"`` lines expanded (own folder first, then the engine's shaders)."""
+    text = path.read_text(encoding="utf-8")
+
+    def expand(match: re.Match) -> str:
+        for folder in (path.parent, SHADER_DIR):
+            candidate = folder / match.group(1)
+            if candidate.is_file() and depth < 8:
+                return _source(candidate, depth + 1)
+        raise FileNotFoundError(f"{path}: #include \"{match.group(1)}\" not found in {path.parent} or {SHADER_DIR}")
+
+    return _INCLUDE.sub(expand, text)
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    n = np.linalg.norm(v)
+    return v / n if n > 0 else v
+
+
+def _default_camera_config():
+    from engine.render.components import CameraConfig
+
+    return CameraConfig(controller="none")
+
+
+def hud_of(world: World) -> Hud | None:
+    return world.try_resource(Hud)

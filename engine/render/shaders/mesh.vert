@@ -1,0 +1,21 @@
+#version 330
+// Instanced lit primitives: one instance = a model matrix (4 columns) and colour + emissive.
+uniform mat4 view_proj;
+in vec3 in_position;
+in vec3 in_normal;
+in vec4 m0;
+in vec4 m1;
+in vec4 m2;
+in vec4 m3;
+in vec4 in_color;
+out vec3 v_pos;
+out vec3 v_normal;
+out vec4 v_color;
+void main() {
+    mat4 model = mat4(m0, m1, m2, m3);
+    vec4 world = model * vec4(in_position, 1.0);
+    v_pos = world.xyz;
+    v_normal = transpose(inverse(mat3(model))) * in_normal;
+    v_color = in_color;
+    gl_Position = view_proj * world;
+}

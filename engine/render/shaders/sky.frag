@@ -1,0 +1,22 @@
+#version 330
+// Sky gradient with a sun disc, reconstructed per pixel from the inverse view-projection.
+uniform mat4 inv_view_proj;
+uniform vec3 camera_pos;
+uniform vec3 sky_top;
+uniform vec3 sky_horizon;
+uniform vec3 sun_dir;
+uniform vec3 sun_color;
+uniform bool ortho;
+uniform vec3 camera_forward;
+in vec2 v_uv;
+out vec4 frag;
+void main() {
+    vec4 far = inv_view_proj * vec4(v_uv * 2.0 - 1.0, 1.0, 1.0);
+    vec3 dir = ortho ? camera_forward : normalize(far.xyz / far.w - camera_pos);
+    float up = clamp(dir.y, 0.0, 1.0);
+    vec3 col = mix(sky_horizon, sky_top, pow(up, 0.6));
+    col = mix(col, sky_horizon * 0.55, clamp(-dir.y * 3.0, 0.0, 1.0));  // below the horizon
+    float s = max(dot(dir, sun_dir), 0.0);
+    col += sun_color * (pow(s, 900.0) * 30.0 + pow(s, 12.0) * 0.25);
+    frag = vec4(col, 1.0);
+}
