@@ -149,11 +149,13 @@ class FixedClock:
         """Add ``real_dt`` seconds; return how many fixed steps to run now (at most ``max_steps``)."""
         self.accumulator += max(0.0, float(real_dt))
         steps = int(self.accumulator // self.dt)
+        remainder = self.accumulator - steps * self.dt
+        if remainder >= self.dt:  # floor division can land one short in floating point
+            steps, remainder = steps + 1, remainder - self.dt
         if steps > self.max_steps:
             self.dropped_time += (steps - self.max_steps) * self.dt
-            self.accumulator -= (steps - self.max_steps) * self.dt
             steps = self.max_steps
-        self.accumulator -= steps * self.dt
+        self.accumulator = min(max(remainder, 0.0), self.dt * (1.0 - 1e-12))
         return steps
 
     @property

@@ -1,0 +1,86 @@
+"""Rendering on headless EGL (llvmpipe in CI): golden images, no effect on state, views, HUD, CLI."""
+
+import subprocess
+import sys
+
+import numpy as np
+
+from engine.app import App
+from engine.render.components import CameraConfig, Hud, build_camera
+from engine.spatial import Transform
+from tests.render_utils import assert_golden, make_renderer, render_app
+
+SCENE = "configs/scenes/sandbox.toml"
+
+
+def test_sandbox_golden_image():
+    app = App(SCENE)
+    image = render_app(app, 200, 120, frames=1, steps_per_frame=30)
+    assert_golden(image, "sandbox")
+
+
+def test_rendering_does_not_change_the_state_hash():
+    plain = App(SCENE, seed=9)
+    plain.step(20)
+    drawn = App(SCENE, seed=9)
+    render_app(drawn, 96, 64, frames=20)
+    assert drawn.state_hash() == plain.state_hash()
+
+
+def test_minimap_view_is_composited_with_a_border():
+    app = App(SCENE)
+    e = app.world.spawn(Transform())
+    cfg = CameraConfig(controller="top", projection="orthographic", ortho_height=40.0, viewport=[0.7, 0.7, 0.3, 0.3],
+                       priority=5, border_color=[1.0, 0.0, 1.0])
+    from engine.registry import BuildContext
+
+    app.world.add(e, build_camera(cfg, BuildContext(app.world, e, "minimap", "", None)))
+    renderer = make_renderer(app, 200, 120)
+    image = render_app(app, frames=1)
+    assert [v.name for v in renderer.views] == ["view0", "view1"]
+    px = np.asarray(image)
+    # the magenta frame is drawn just outside the minimap rectangle (top-right corner of the window)
+    x0, y0 = int(0.7 * 200) - 1, 120 - int(0.7 * 120) - 1
+    assert tuple(px[y0 - 5, x0]) == (255, 0, 255)
+    assert_golden(image, "sandbox_minimap")
+
+
+def test_hud_text_is_drawn():
+    app = App(SCENE)
+    plain = np.asarray(render_app(app, 160, 96), np.int16)
+    app.world.resource(Hud).center = "YOU WIN"
+    text = np.asarray(render_app(app, 160, 96, frames=1), np.int16)
+    changed = np.abs(text - plain).max(axis=2) > 40
+    ys, xs = np.nonzero(changed)
+    assert changed.sum() > 100 and abs(xs.mean() - 80) < 20 and abs(ys.mean() - 48) < 20
+
+
+def test_resize_and_pool_reuse():
+    app = App(SCENE)
+    renderer = make_renderer(app, 64, 48)
+    app.step(1)
+    app.render_frame()
+    allocations = renderer.graph.pool.allocations
+    compiles = renderer.graph.compile_count
+    app.render_frame()
+    assert renderer.graph.pool.allocations == allocations  # transient targets reused across frames
+    assert renderer.graph.compile_count == compiles  # same passes: no recompile
+    renderer.resize(80, 40)
+    app.render_frame()
+    assert renderer.read_image().size == (80, 40)
+    renderer.release()
+    app.renderer = None
+
+
+def test_cli_screenshot_and_graph_dot(tmp_path):
+    shot = tmp_path / "shot.png"
+    res = subprocess.run([sys.executable, "-m", "engine", "run", SCENE, "--headless", "--steps", "3", "--size", "96",
+                          "64", "--screenshot", str(shot), "--profile", "--hash"], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    from PIL import Image
+
+    assert Image.open(shot).size == (96, 64)
+    assert "per-pass time" in res.stdout and len(res.stdout.strip().splitlines()[-1]) == 32
+    dot = subprocess.run([sys.executable, "-m", "engine", "graph", SCENE, "--dot"], capture_output=True, text=True)
+    assert dot.returncode == 0, dot.stderr
+    assert dot.stdout.startswith("digraph") and "tonemap.view0" in dot.stdout and "composite" in dot.stdout

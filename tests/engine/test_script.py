@@ -1,0 +1,132 @@
+from dataclasses import dataclass
+
+import pytest
+from pydantic import Field
+
+from engine.app import App
+from engine.config import ConfigModel
+from engine.registry import default_registry
+from engine.schedule import Stage
+from engine.script import Script, ScriptError, ScriptFailure, Scripts, make_slot, script
+
+
+@dataclass
+class Ping:
+    n: int
+
+
+@dataclass
+class Counter:
+    value: int = 0
+
+
+@script("counter")
+class CounterScript(Script):
+    events = (Ping,)
+
+    class Params(ConfigModel):
+        step: int = Field(1, ge=1, le=10)
+
+    def on_start(self):
+        self.log = ["start"]
+
+    def on_update(self, dt):
+        self.ctx.get(Counter).value += self.params.step
+
+    def on_event(self, event):
+        self.log.append(f"ping{event.n}")
+
+    def on_destroy(self):
+        self.ctx.world.resource(list).append(("destroyed", self.ctx.entity))
+
+
+@script("broken")
+class Broken(Script):
+    def on_update(self, dt):
+        if self.ctx.tick == 2:
+            raise ValueError("boom")
+        self.ctx.get(Counter).value += 1
+
+
+@script("spawns")
+class Spawns(Script):
+    def on_update(self, dt):
+        child = self.ctx.spawn(Counter(100))
+        assert not self.ctx.world.alive(child)  # deferred until the stage's sync point
+
+
+def make_app(strict=False, *scripts_per_entity):
+    registry = default_registry([])
+    registry.add_scripts([CounterScript, Broken, Spawns])
+    app = App(registry=registry, strict=strict)
+    app.world.insert_resource([])
+    entities = []
+    for names in scripts_per_entity:
+        e = app.world.spawn(Counter())
+        slots = [make_slot(app.world, e, registry.script(n), registry.script(n).Params()) for n in names]
+        app.world.add(e, Scripts(slots))
+        entities.append(e)
+    return app, entities
+
+
+def test_hooks_params_and_events():
+    app, (e,) = make_app(False, ["counter"])
+    app.step(1)
+    app.world.events.send(Ping(7))
+    app.step(2)
+    slot = app.world.get(e, Scripts).slots[0]
+    assert app.world.get(e, Counter).value == 3
+    assert slot.script.log == ["start", "ping7"]
+    app.world.despawn(e)
+    assert app.world.resource(list) == [("destroyed", e)]
+
+
+def test_script_error_is_isolated_and_reported(caplog):
+    app, (bad, good) = make_app(False, ["broken"], ["counter"])
+    app.step(5)
+    assert app.world.get(bad, Counter).value == 2  # ran ticks 0 and 1, raised at tick 2, then disabled
+    assert app.world.get(good, Counter).value == 5  # the game went on
+    failure = app.world.resource(__import__("engine.script", fromlist=["ScriptRuntime"]).ScriptRuntime).failures[0]
+    assert isinstance(failure, ScriptFailure) and failure.script == "broken" and failure.entity == bad
+    assert "ValueError: boom" in failure.error and "Traceback" in failure.traceback
+    assert "script 'broken' on entity" in caplog.text
+
+
+def test_strict_mode_reraises():
+    app, _ = make_app(True, ["broken"])
+    with pytest.raises(ScriptError, match="'broken' on entity 1 raised in on_update: boom"):
+        app.step(5)
+
+
+def test_spawn_from_script_applies_at_sync_point():
+    app, (e,) = make_app(True, ["spawns"])
+    app.step(1)
+    assert len(app.world.query(Counter)) == 2
+    app.step(1)
+    assert len(app.world.query(Counter)) == 3
+
+
+def test_plugin_command_called_from_script():
+    registry = default_registry([])
+    calls = []
+    registry.add_command("test.fire", lambda world, entity, power: calls.append((entity, power)) or power * 2)
+
+    @script("caller")
+    class Caller(Script):
+        def on_update(self, dt):
+            self.result = self.ctx.call("test.fire", power=3)
+
+    registry.add_script(Caller)
+    app = App(registry=registry, strict=True)
+    e = app.world.spawn()
+    app.world.add(e, Scripts([make_slot(app.world, e, Caller, Caller.Params())]))
+    app.step(1)
+    assert calls == [(e, 3)] and app.world.get(e, Scripts).slots[0].script.result == 6
+
+
+def test_schedule_print_order(capsys):
+    from engine.cli import main
+
+    assert main(["run", "configs/scenes/sandbox.toml", "--print-schedule"]) == 0
+    out = capsys.readouterr().out
+    assert out.index("core.input") < out.index("core.scripts") < out.index("render.draw")

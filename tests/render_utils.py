@@ -1,0 +1,85 @@
+"""Headless rendering for tests: one shared EGL context, small offscreen renders, golden-image checks.
+
+``render_app(app, width, height, frames)`` renders an App headless and returns a PIL image;
+``assert_golden(image, name)`` compares it with ``tests/golden/<name>.png`` using a tolerance on the
+mean and the maximum channel difference.  On failure it writes ``<name>.actual.png`` and
+``<name>.diff.png`` next to the reference.  Run pytest with ``--regen-golden`` (or set
+``REGEN_GOLDEN=1``) to write the references on purpose.  Render tests never skip: with no context
+they fail with a message naming the system packages to install.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+GOLDEN_DIR = Path(__file__).parent / "golden"
+_CONTEXT = None
+REGEN = {"on": bool(os.environ.get("REGEN_GOLDEN"))}
+
+
+def gl_context():
+    """The session's shared headless context; fails the test (never skips) when EGL is missing."""
+    global _CONTEXT
+    if _CONTEXT is None:
+        from engine.render.frontend import ContextError, create_headless_context
+
+        try:
+            _CONTEXT = create_headless_context()
+        except ContextError as exc:
+            pytest.fail(str(exc), pytrace=False)
+    return _CONTEXT
+
+
+def make_renderer(app, width: int = 160, height: int = 120):
+    from engine.render.renderer import Renderer
+
+    return Renderer(app, gl_context(), width, height)
+
+
+def render_app(app, width: int = 160, height: int = 120, frames: int = 1, steps_per_frame: int = 1):
+    """Render ``frames`` frames (each after ``steps_per_frame`` ticks); return the last as a PIL image."""
+    renderer = app.renderer if app.renderer is not None else make_renderer(app, width, height)
+    try:
+        for _ in range(frames):
+            app.step(steps_per_frame)
+            app.render_frame()
+        return renderer.read_image()
+    finally:
+        renderer.release()
+        app.renderer = None
+
+
+def image_difference(a, b) -> tuple[float, int, np.ndarray]:
+    """(mean absolute channel difference, max channel difference, per-pixel difference image)."""
+    x = np.asarray(a.convert("RGB"), np.int16)
+    y = np.asarray(b.convert("RGB"), np.int16)
+    diff = np.abs(x - y)
+    return float(diff.mean()), int(diff.max()), diff.max(axis=2).astype(np.uint8)
+
+
+def assert_golden(image, name: str, mean_tol: float = 2.0, max_tol: int = 80) -> None:
+    """Compare ``image`` with ``tests/golden/<name>.png`` (mean and max channel difference, 0..255)."""
+    from PIL import Image
+
+    ref_path = GOLDEN_DIR / f"{name}.png"
+    if REGEN["on"] or not ref_path.exists():
+        if not REGEN["on"]:
+            pytest.fail(f"no reference image {ref_path}; run pytest --regen-golden to create it, then look at it",
+                        pytrace=False)
+        GOLDEN_DIR.mkdir(parents=True, exist_ok=True)
+        image.save(ref_path)
+        return
+    ref = Image.open(ref_path)
+    if ref.size != image.size:
+        image.save(GOLDEN_DIR / f"{name}.actual.png")
+        pytest.fail(f"{name}: size {image.size} differs from the reference {ref.size}", pytrace=False)
+    mean, peak, diff = image_difference(image, ref)
+    if mean > mean_tol or peak > max_tol:
+        image.save(GOLDEN_DIR / f"{name}.actual.png")
+        Image.fromarray(np.clip(diff.astype(np.int32) * 4, 0, 255).astype(np.uint8)).save(GOLDEN_DIR / f"{name}.diff.png")
+        pytest.fail(f"{name}: image differs from {ref_path} (mean {mean:.2f} > {mean_tol} or max {peak} > {max_tol}); "
+                    f"see {name}.actual.png and {name}.diff.png next to it", pytrace=False)
