@@ -133,15 +133,17 @@ class World:
             return cached
         stores = [self._stores.get(c, {}) for c in ctypes]
         if not stores:
-            candidates = self._entities.keys()
+            matched = set(self._entities)
         else:
-            candidates = min(stores, key=len).keys()
-        excluded = [self._stores.get(c, {}) for c in exclude]
-        result = [
-            (e, tuple(s[e] for s in stores))
-            for e in sorted(candidates)
-            if all(e in s for s in stores) and not any(e in x for x in excluded)
-        ]
+            smallest = min(stores, key=len)
+            matched = set(smallest).intersection(*(s for s in stores if s is not smallest))
+        for c in exclude:
+            store = self._stores.get(c)
+            if store:
+                matched.difference_update(store)
+        entities = sorted(matched)
+        columns = [list(map(s.__getitem__, entities)) for s in stores]  # C-level gathers, no per-entity Python
+        result = list(zip(entities, zip(*columns))) if columns else [(e, ()) for e in entities]
         self._query_cache[key] = result
         for c in (*ctypes, *exclude):
             self._cache_by_type.setdefault(c, set()).add(key)
