@@ -48,8 +48,7 @@ class App:
         self.world.insert_resource(self)  # systems reach the app (and its renderer) through the world
         for setup in self.registry.world_setup:
             setup(self.world)
-        if self.plan is not None:
-            spawn_plan(self.world, self.registry, self.plan)
+        self.records = spawn_plan(self.world, self.registry, self.plan) if self.plan is not None else []
         self.renderer: Any = None
         self.started = False
         self.frame_hooks: list[Callable[[App], None]] = []

@@ -38,6 +38,15 @@ def main(argv: list[str] | None = None) -> int:
     sch = sub.add_parser("schema", help="write a JSON Schema per registered component")
     sch.add_argument("--out", type=Path, required=True)
 
+    docs = sub.add_parser("docs", help="write docs/reference/<component>.md from the config models")
+    docs.add_argument("--out", type=Path, default=Path("docs/reference"))
+
+    gal = sub.add_parser("gallery", help="render every preset in configs/effects/ headless to a PNG")
+    gal.add_argument("--out", type=Path, default=Path("docs/gallery"))
+    gal.add_argument("--configs", type=Path, default=Path("configs"))
+    gal.add_argument("--size", nargs=2, type=int, default=(320, 200), metavar=("W", "H"))
+    gal.add_argument("--only", help="only presets whose path contains this text")
+
     gr = sub.add_parser("graph", help="print the compiled render graph of a scene")
     gr.add_argument("scene")
     gr.add_argument("--dot", action="store_true", help="Graphviz format (culled passes dashed)")
@@ -54,6 +63,16 @@ def main(argv: list[str] | None = None) -> int:
             return validate_command(args.paths)
         if args.command == "schema":
             return schema_command(args.out)
+        if args.command == "docs":
+            from engine.docgen import write_reference
+
+            written = write_reference(default_registry(), args.out)
+            print(f"wrote {len(written)} reference page(s) to {args.out}")
+            return 0
+        if args.command == "gallery":
+            from engine.gallery import gallery_command
+
+            return gallery_command(args)
         if args.command == "graph":
             from engine.runner import graph_command
 

@@ -54,6 +54,10 @@ class ComponentSpec:
     build: ComponentFactory | None = None  # None: the validated model itself is the component
     preset_dir: str | None = None  # presets live in configs/effects/<preset_dir>/
     description: str = ""
+    # Hot reload: keys whose change needs the component rebuilt (grid sizes, capacities).  None means
+    # "unknown", so any change rebuilds; a tuple (even empty) lets other changes swap the config in place.
+    structural: tuple[str, ...] | None = None
+    live_update: Callable[[Any, Any, Any, int], None] | None = None  # (old cfg, new cfg, world, entity)
 
     def instantiate(self, config: BaseModel, ctx: BuildContext) -> list[Any]:
         if self.build is None:
@@ -82,10 +86,20 @@ class Registry:
 
     # -- registration
     def add_component(self, name: str, model: type[BaseModel], build: ComponentFactory | None = None, *,
-                      preset_dir: str | None = None, description: str = "") -> ComponentSpec:
+                      preset_dir: str | None = None, description: str = "",
+                      structural: tuple[str, ...] | None = None,
+                      live_update: Callable[[Any, Any, Any, int], None] | None = None) -> ComponentSpec:
+        """Register a TOML-nameable component.
+
+        ``build(cfg, ctx)`` turns the validated config into runtime components (return ``[cfg, state]`` so
+        systems can read live parameters from ``cfg``).  For hot reload, ``structural`` names the keys whose
+        change rebuilds the component (others swap the config in place, state kept) and ``live_update``
+        is called after an in-place swap.
+        """
         if name in self.components:
             raise RegistryError(f"component '{name}' is already registered")
-        spec = ComponentSpec(name, model, build, preset_dir, description or (model.__doc__ or "").strip())
+        spec = ComponentSpec(name, model, build, preset_dir, description or (model.__doc__ or "").strip(),
+                             tuple(structural) if structural is not None else None, live_update)
         self.components[name] = spec
         return spec
 

@@ -211,33 +211,63 @@ def _fmt(key: tuple) -> str:
     return format_key(key)
 
 
-def spawn_plan(world: World, registry: Registry, plan: ScenePlan) -> list[int]:
-    """Create every planned entity (in file order, so ids follow the file)."""
+@dataclass
+class EntityRecord:
+    """What the scene built for one entity, for hot reload: configs and the component types they made."""
+
+    entity: int
+    name: str
+    components: dict[str, tuple[Any, list[type]]] = field(default_factory=dict)
+
+
+def build_component(world: World, registry: Registry, plan: ScenePlan, entity: int, name: str, cname: str,
+                    cfg: Any) -> list[Any]:
+    ctx = BuildContext(world, entity, name, str(plan.file), plan.configs_root)
+    return registry.component(cname).instantiate(cfg, ctx)
+
+
+def spawn_entity(world: World, registry: Registry, plan: ScenePlan, index: int, ent: EntityPlan) -> EntityRecord:
+    """Spawn one planned entity; a failing build raises ConfigError and leaves nothing behind."""
     from engine.builtin import Name
 
-    problems: list[Problem] = []
-    spawned = []
-    for i, ent in enumerate(plan.entities):
-        entity = world.spawn()
-        spawned.append(entity)
-        if ent.name:
-            world.add(entity, Name(ent.name))
-        ctx = BuildContext(world, entity, ent.name, str(plan.file), plan.configs_root)
-        for cname, cfg in ent.components:
-            try:
-                for comp in registry.component(cname).instantiate(cfg, ctx):
-                    world.add(entity, comp)
-            except (ValueError, OSError) as exc:
-                problems.append(Problem(str(plan.file), f"entities[{i}].components.{cname}", str(exc)))
-        if ent.scripts:
-            slots = []
-            for cls, params, enabled in ent.scripts:
-                slot = make_slot(world, entity, cls, params)
-                slot.enabled = enabled
-                slots.append(slot)
-            world.add(entity, Scripts(slots))
+    entity = world.spawn()
+    record = EntityRecord(entity, ent.name)
+    if ent.name:
+        world.add(entity, Name(ent.name))
+    problems = []
+    for cname, cfg in ent.components:
+        try:
+            built = build_component(world, registry, plan, entity, ent.name, cname, cfg)
+        except (ValueError, OSError) as exc:
+            problems.append(Problem(str(plan.file), f"entities[{index}].components.{cname}", str(exc)))
+            continue
+        for comp in built:
+            world.add(entity, comp)
+        record.components[cname] = (cfg, [type(c) for c in built])
     if problems:
-        for entity in spawned:
-            world.despawn(entity)
+        world.despawn(entity)
         raise ConfigError(problems)
-    return spawned
+    if ent.scripts:
+        slots = []
+        for cls, params, enabled in ent.scripts:
+            slot = make_slot(world, entity, cls, params)
+            slot.enabled = enabled
+            slots.append(slot)
+        world.add(entity, Scripts(slots))
+    return record
+
+
+def spawn_plan(world: World, registry: Registry, plan: ScenePlan) -> list[EntityRecord]:
+    """Create every planned entity (in file order, so ids follow the file); all or nothing."""
+    problems: list[Problem] = []
+    records = []
+    for i, ent in enumerate(plan.entities):
+        try:
+            records.append(spawn_entity(world, registry, plan, i, ent))
+        except ConfigError as exc:
+            problems.extend(exc.problems)
+    if problems:
+        for record in records:
+            world.despawn(record.entity)
+        raise ConfigError(problems)
+    return records

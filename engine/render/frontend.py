@@ -72,6 +72,12 @@ def run_rendered(app: App, args: argparse.Namespace, steps: int | None) -> None:
         _run_window(app, size, steps, every, last, args.profile)
 
 
+def _reloader(app: App):
+    from engine.reload import HotReloader
+
+    return HotReloader(app) if app.plan is not None else None
+
+
 def _run_headless(app: App, size, steps, every, last, profile: bool) -> None:
     renderer = headless_renderer(app, *size)
     renderer.timer.enabled = profile
@@ -118,8 +124,9 @@ def _run_window(app: App, size, steps, every, last, profile: bool) -> None:
     renderer = Renderer(app, ctx, *window.get_framebuffer_size(), screen=ctx.detect_framebuffer())
     renderer.timer.enabled = profile
     queue = app.world.resource(InputQueue)
-    state = {"frames": 0, "last": time.perf_counter()}
-    attach_window_input(window, queue, renderer)
+    state = {"frames": 0, "last": time.perf_counter(), "poll": 0.0}
+    reloader = _reloader(app)
+    attach_window_input(window, queue, renderer, reloader)
 
     @window.event
     def on_resize(width, height):
@@ -131,6 +138,9 @@ def _run_window(app: App, size, steps, every, last, profile: bool) -> None:
     def on_draw():
         now = time.perf_counter()
         dt, state["last"] = now - state["last"], now
+        if reloader is not None and now - state["poll"] > 0.5:  # hot reload: poll the files twice a second
+            state["poll"] = now
+            reloader.poll()
         if steps is not None:
             app.step(1)
             app.render_frame()
@@ -149,14 +159,20 @@ def _run_window(app: App, size, steps, every, last, profile: bool) -> None:
         print(renderer.timer.report())
 
 
-def attach_window_input(window, queue: InputQueue, renderer: Renderer) -> None:
-    """Translate pyglet events into engine InputEvents (pyglet's y axis points up, as the engine's)."""
+def attach_window_input(window, queue: InputQueue, renderer: Renderer, reloader=None) -> None:
+    """Translate pyglet events into engine InputEvents (pyglet's y axis points up, as the engine's).
+
+    F3 toggles the profiler overlay and F5 forces a config reload; both are front-end actions, not
+    game input, but they are still passed on so that game scripts may react.
+    """
 
     def on_key_press(symbol, modifiers):
         name = key_name(symbol)
         if name == "f3":
             renderer.show_profiler = not renderer.show_profiler
             renderer.timer.enabled = renderer.show_profiler or renderer.timer.enabled
+        if name == "f5" and reloader is not None:
+            reloader.reload()
         queue.push(InputEvent("key_down", name))
         return True  # swallow Escape: games use it for pause; the close button quits
 

@@ -372,8 +372,8 @@ class HudFeature(RenderFeature):
         super().__init__(renderer)
         self._textures: dict[tuple, moderngl.Texture] = {}
 
-    def extract(self, world) -> list[tuple[str, tuple, int]]:
-        items: list[tuple[str, tuple, int]] = []
+    def extract(self, world) -> list[tuple]:
+        items: list[tuple] = []
         hud = world.try_resource(Hud)
         if hud is not None:
             if hud.lines:
@@ -382,21 +382,26 @@ class HudFeature(RenderFeature):
                 items.append(("center", tuple(hud.center.split("\n")), 34))
             if hud.show_help and hud.help:
                 items.append(("help", tuple(hud.help), 16))
+        status = world.try_resource(_reload_status())
+        if status is not None and status.errors:
+            lines = ("config error - the last good config stays in force until the file is fixed:",
+                     *status.errors[:12])
+            items.append(("bottom_left", lines, 14, (255, 120, 110)))
         if self.renderer.show_profiler:
             t = self.renderer.timer
             rows = [f"{name:<28s}{ms:7.2f} ms" for name, ms in sorted(t.last.items(), key=lambda kv: -kv[1])[:14]]
             items.append(("top_right", ("profiler (F3)", *rows), 13))
         return items
 
-    def _texture(self, lines: tuple, size: int) -> moderngl.Texture:
-        key = (lines, size)
+    def _texture(self, lines: tuple, size: int, color=(255, 255, 255)) -> moderngl.Texture:
+        key = (lines, size, color)
         tex = self._textures.get(key)
         if tex is None:
             if len(self._textures) > 32:
                 for old in self._textures.values():
                     old.release()
                 self._textures.clear()
-            img = text_image(list(lines), size)
+            img = text_image(list(lines), size, color)
             tex = self.ctx.texture(img.size, 4, img.tobytes())
             tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
             self._textures[key] = tex
@@ -418,8 +423,8 @@ class HudFeature(RenderFeature):
             self.ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
             prog = r.program((SHADERS / "sprite.vert").read_text(), (SHADERS / "sprite.frag").read_text())
             vao = r.__dict__.setdefault("_sprite_vao", self.ctx.vertex_array(prog, []))
-            for where, lines, size in data:
-                tex = self._texture(lines, size)
+            for where, lines, size, *color in data:
+                tex = self._texture(lines, size, *color)
                 w, h = tex.size
                 x, y = _anchor(where, w, h, r.width, r.height)
                 tex.use(0)
@@ -435,12 +440,20 @@ class HudFeature(RenderFeature):
         self._textures.clear()
 
 
+def _reload_status():
+    from engine.reload import ReloadStatus
+
+    return ReloadStatus
+
+
 def _anchor(where: str, w: int, h: int, sw: int, sh: int) -> tuple[int, int]:
     margin = 8
     if where == "top_left":
         return margin, sh - h - margin
     if where == "top_right":
         return sw - w - margin, sh - h - margin
+    if where == "bottom_left":
+        return margin, margin
     if where == "center":
         return (sw - w) // 2, (sh - h) // 2
     return (sw - w) // 2, margin  # help: bottom centre
