@@ -26,6 +26,10 @@ class Commands:
         self._queue.append(("spawn", entity, components))
         return entity
 
+    def spawn_reserved(self, entity: Entity, components) -> None:
+        """Queue the spawn of an id taken earlier with ``world.reserve()`` (prefabs build with it)."""
+        self._queue.append(("spawn", entity, tuple(components)))
+
     def despawn(self, entity: Entity) -> None:
         self._queue.append(("despawn", entity, None))
 

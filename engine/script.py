@@ -73,6 +73,18 @@ class ScriptContext:
     def spawn(self, *components: Any) -> Entity:
         return self.world.commands.spawn(*components)
 
+    def spawn_prefab(self, name: str, position=None, extra: tuple = ()) -> Entity:
+        """Spawn ``configs/prefabs/<name>.toml`` (validated like a scene) at ``position``; deferred."""
+        from engine.app import App
+        from engine.prefab import PrefabLibrary
+
+        app = self.world.resource(App)
+        library = self.world.try_resource(PrefabLibrary)
+        if library is None:
+            library = PrefabLibrary(app)
+            self.world.insert_resource(library)
+        return library.spawn(name, position, extra)
+
     def despawn(self, entity: Entity | None = None) -> None:
         self.world.commands.despawn(self.entity if entity is None else entity)
 
