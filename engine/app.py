@@ -14,9 +14,11 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from engine.builtin import InputSource
 from engine.registry import Registry, default_registry
 from engine.scene import SceneConfig, ScenePlan, plan_scene, read_scene, spawn_plan
 from engine.schedule import FRAME_STAGES, TICK_STAGES, FixedClock, Stage
@@ -25,6 +27,14 @@ from engine.state import Snapshot, restore, snapshot, state_hash
 from engine.world import World
 
 log = logging.getLogger("engine")
+
+
+@dataclass
+class TimeControl:
+    """World state resource: pause (simulation stages skipped) and a pending restart."""
+
+    paused: bool = False
+    restart_requested: bool = False
 
 
 class App:
@@ -41,17 +51,25 @@ class App:
             self.plan = plan_scene(self.scene_path, self.registry, configs_root)
             self.config = self.plan.config
         self.seed = int(self.config.scene.seed if seed is None else seed)
-        self.world = World(self.seed)
+        self.strict = strict
         self.schedule = self.registry.schedule
         self.clock = FixedClock(self.config.scene.fixed_dt, self.config.scene.max_catchup_steps)
-        self.world.insert_resource(ScriptRuntime(self.registry, strict=strict))
-        self.world.insert_resource(self)  # systems reach the app (and its renderer) through the world
-        for setup in self.registry.world_setup:
-            setup(self.world)
-        self.records = spawn_plan(self.world, self.registry, self.plan) if self.plan is not None else []
+        self.records = []
+        self.world = self._new_world()
         self.renderer: Any = None
         self.started = False
         self.frame_hooks: list[Callable[[App], None]] = []
+
+    def _new_world(self) -> World:
+        world = World(self.seed)
+        world.insert_resource(ScriptRuntime(self.registry, strict=self.strict))
+        world.insert_resource(self)  # systems reach the app (and its renderer) through the world
+        world.insert_resource(TimeControl(), state=True)
+        for setup in self.registry.world_setup:
+            setup(world)
+        self.world = world
+        self.records = spawn_plan(world, self.registry, self.plan) if self.plan is not None else []
+        return world
 
     @property
     def dt(self) -> float:
@@ -70,12 +88,26 @@ class App:
             self._run_stage(Stage.STARTUP)
 
     def tick(self) -> None:
-        """One fixed step of game logic and simulation."""
+        """One fixed step of game logic and simulation (simulation stages skipped while paused)."""
         self.startup()
+        control = self.world.resource(TimeControl)
         for stage in TICK_STAGES:
+            if control.paused and stage in (Stage.SIMULATION, Stage.POST_SIMULATION):
+                continue
             self._run_stage(stage)
         self.world.events.update()
         self.world.tick += 1
+        if control.restart_requested:
+            self.restart()
+
+    def restart(self) -> None:
+        """Rebuild the world from the current scene plan (same seed): the game's R key."""
+        renderer, source = self.renderer, self.world.try_resource(InputSource)
+        self.world = self._new_world()
+        if source is not None:
+            self.world.insert_resource(source)
+        self.started = False
+        self.renderer = renderer
 
     def step(self, n: int = 1) -> None:
         """Run exactly ``n`` ticks (the manual clock)."""

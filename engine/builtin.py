@@ -139,6 +139,22 @@ def _setup_world(world: World) -> None:
     world.despawn_hooks.append(lambda w, e: w.random.drop(e))
 
 
+def _pause(world: World, entity: int, paused: bool | None = None) -> bool:
+    """``ctx.call("engine.pause")`` toggles (or sets) the pause; returns the new state."""
+    from engine.app import TimeControl
+
+    control = world.resource(TimeControl)
+    control.paused = (not control.paused) if paused is None else bool(paused)
+    return control.paused
+
+
+def _restart(world: World, entity: int) -> None:
+    """``ctx.call("engine.restart")``: rebuild the scene after this tick."""
+    from engine.app import TimeControl
+
+    world.resource(TimeControl).restart_requested = True
+
+
 class CorePlugin:
     name = "core"
 
@@ -149,6 +165,8 @@ class CorePlugin:
         registry.add_system(input_system, Stage.INPUT, name="core.input")
         registry.add_system(run_scripts, Stage.SCRIPT, name="core.scripts")
         registry.on_world(_setup_world)
+        registry.add_command("engine.pause", _pause)
+        registry.add_command("engine.restart", _restart)
         from engine import stock_scripts
 
         registry.add_scripts(stock_scripts.SCRIPTS)

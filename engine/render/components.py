@@ -174,3 +174,4 @@ class Hud:
     center: str = ""
     help: list[str] = field(default_factory=list)
     show_help: bool = False
+    show_fps: bool = False  # the renderer appends its measured frame rate (display only, not state)

@@ -376,8 +376,11 @@ class HudFeature(RenderFeature):
         items: list[tuple] = []
         hud = world.try_resource(Hud)
         if hud is not None:
-            if hud.lines:
-                items.append(("top_left", tuple(hud.lines), 16))
+            lines = list(hud.lines)
+            if hud.show_fps:
+                lines.append(f"FPS {self.renderer.fps:5.1f}")
+            if lines:
+                items.append(("top_left", tuple(lines), 16))
             if hud.center:
                 items.append(("center", tuple(hud.center.split("\n")), 34))
             if hud.show_help and hud.help:

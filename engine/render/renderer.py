@@ -116,6 +116,8 @@ class Renderer:
         self.views: list[View] = []
         self.show_profiler = False
         self._data: list[Any] = []
+        self.fps = 0.0
+        self._last_draw: float | None = None
         self._final: moderngl.Texture | None = None
         self._final_fbo: moderngl.Framebuffer | None = None
         self._resize_final()
@@ -262,6 +264,10 @@ class Renderer:
     def draw(self) -> None:
         """Render stage: declare, compile (cached) and execute the graph; present in a window."""
         self.declare().execute()
+        now = time.perf_counter()
+        if self._last_draw is not None:
+            self.fps = 0.9 * self.fps + 0.1 / max(now - self._last_draw, 1e-6) if self.fps else 1.0 / (now - self._last_draw)
+        self._last_draw = now
         self.timer.frames += 1
         self.frame_index += 1
         if self.screen is not None:
