@@ -23,6 +23,7 @@ demo: setup
 	$(PY) -m engine run $(SCENE) $(DEMO_ARGS)
 
 test: setup
+	$(PY) -m engine validate configs/
 	$(PY) -m pytest
 
 bench: setup

@@ -103,7 +103,11 @@ def validate_file(path: Path, registry: Registry) -> None:
     from engine.scene import plan_scene
 
     data, text = read_toml(path)
-    if path.parent.parent.name == "effects":
+    if path.parent.name == "prefabs":
+        from engine.prefab import PrefabLibrary
+
+        PrefabLibrary(registry, path.parent.parent).plan(path.stem)
+    elif path.parent.parent.name == "effects":
         spec = registry.preset_component(path.parent.name)
         if spec is None:
             raise ConfigError([Problem(str(path), "", f"no registered component keeps presets in "

@@ -1,8 +1,9 @@
 """``python -m engine gallery``: render every preset in configs/effects/ headless to a PNG.
 
 Each preset is dropped into a scene template: ``configs/gallery/<effect>.toml`` when the effect ships
-one (its component table says ``preset = "@PRESET@"``), otherwise a generic stage (flat terrain, an
-orbit camera, the component on an entity above the origin).  ``docs/gallery.md`` lists the pictures
+one (a valid scene whose ``preset = "<effect>/..."`` line is pointed at each preset in turn; a
+``#:gallery-steps N`` line sets the ticks simulated before the picture), otherwise a generic stage
+(flat terrain, an orbit camera, the component on an entity above the origin).  ``docs/gallery.md`` lists the pictures
 with the preset names and the first comment line of each preset.
 """
 
@@ -10,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import re
 import tempfile
 from pathlib import Path
 
@@ -81,6 +83,7 @@ def gallery_command(args: argparse.Namespace) -> int:
             if line.startswith("#:gallery-steps"):
                 steps = int(line.split()[-1])
         text = text.replace("@COMPONENT@", spec.name).replace("@PRESET@", rel)
+        text = re.sub(rf'preset\s*=\s*"{re.escape(preset.parent.name)}/[^"]*"', f'preset = "{rel}"', text)
         with tempfile.NamedTemporaryFile("w", suffix=".toml", dir=configs / "scenes", delete=False) as fh:
             fh.write(text)
             scene = Path(fh.name)

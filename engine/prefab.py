@@ -14,26 +14,34 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from engine.config import ConfigError, Problem, model_problems, read_toml, resolve_inside
-from engine.scene import EntityConfig, EntityPlan, _load_script, build_component, load_component
+from engine.registry import BuildContext, Registry
+from engine.scene import EntityConfig, EntityPlan, _load_script, load_component
 
 if TYPE_CHECKING:
     from engine.app import App
+    from engine.world import World
 
 from pydantic import ValidationError
 
 
 class PrefabLibrary:
-    """Validated prefabs of one app, loaded on first use (a non-state resource)."""
+    """Validated prefabs under one configs root, loaded on first use (a non-state resource)."""
 
-    def __init__(self, app: App) -> None:
-        self.app = app
+    def __init__(self, registry: Registry, root: Path) -> None:
+        self.registry = registry
+        self.root = Path(root)
         self._plans: dict[str, EntityPlan] = {}
 
-    @property
-    def root(self) -> Path:
-        if self.app.plan is None:
-            raise ConfigError([Problem("<no scene>", "", "prefabs need an app built from a scene file")])
-        return self.app.plan.configs_root
+    @classmethod
+    def of(cls, app: App) -> PrefabLibrary:
+        """The app's library (created on first use)."""
+        library = app.world.try_resource(cls)
+        if library is None:
+            if app.plan is None:
+                raise ConfigError([Problem("<no scene>", "", "prefabs need an app built from a scene file")])
+            library = cls(app.registry, app.plan.configs_root)
+            app.world.insert_resource(library)
+        return library
 
     def plan(self, name: str) -> EntityPlan:
         cached = self._plans.get(name)
@@ -51,7 +59,7 @@ class PrefabLibrary:
             ent = EntityConfig.model_validate(data)
         except ValidationError as exc:
             raise ConfigError(model_problems(exc, EntityConfig, str(path), (), text)) from None
-        registry = self.app.registry
+        registry = self.registry
         comps, scripts, problems = [], [], []
         for cname, values in ent.components.items():
             try:
@@ -70,18 +78,18 @@ class PrefabLibrary:
         self._plans[name] = plan
         return plan
 
-    def spawn(self, name: str, position: Any = None, extra: tuple = ()) -> int:
+    def spawn(self, world: World, name: str, position: Any = None, extra: tuple = ()) -> int:
         """Queue a spawn of prefab ``name`` (optionally moved to ``position``); returns the reserved id."""
         from engine.builtin import Name
         from engine.script import Scripts, make_slot
         from engine.spatial import Transform
 
         plan = self.plan(name)
-        world = self.app.world
         entity = world.reserve()
         built: list[Any] = [Name(plan.name)]
+        ctx = BuildContext(world, entity, plan.name, str(self.root / "prefabs" / f"{name}.toml"), self.root)
         for cname, cfg in plan.components:
-            built += build_component(world, self.app.registry, self.app.plan, entity, plan.name, cname, cfg)
+            built += self.registry.component(cname).instantiate(cfg, ctx)
         if position is not None:
             transform = next((c for c in built if isinstance(c, Transform)), None)
             if transform is None:

@@ -78,12 +78,7 @@ class ScriptContext:
         from engine.app import App
         from engine.prefab import PrefabLibrary
 
-        app = self.world.resource(App)
-        library = self.world.try_resource(PrefabLibrary)
-        if library is None:
-            library = PrefabLibrary(app)
-            self.world.insert_resource(library)
-        return library.spawn(name, position, extra)
+        return PrefabLibrary.of(self.world.resource(App)).spawn(self.world, name, position, extra)
 
     def despawn(self, entity: Entity | None = None) -> None:
         self.world.commands.despawn(self.entity if entity is None else entity)
