@@ -59,6 +59,7 @@ class App:
         self.renderer: Any = None
         self.started = False
         self.frame_hooks: list[Callable[[App], None]] = []
+        self.pre_tick: list[Callable[[App], None]] = []
 
     def _new_world(self) -> World:
         world = World(self.seed)
@@ -90,6 +91,8 @@ class App:
     def tick(self) -> None:
         """One fixed step of game logic and simulation (simulation stages skipped while paused)."""
         self.startup()
+        for hook in list(self.pre_tick):
+            hook(self)  # e.g. an autopilot or a test harness injecting input for this tick
         control = self.world.resource(TimeControl)
         for stage in TICK_STAGES:
             if control.paused and stage in (Stage.SIMULATION, Stage.POST_SIMULATION):

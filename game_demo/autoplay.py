@@ -1,0 +1,168 @@
+"""The autoplay: a scripted player that plays the demo to the win screen.
+
+It reads the game state and pushes :class:`~engine.input.InputEvent` objects into the world's
+``InputQueue`` before every tick: the same path the window's keyboard and mouse events take, so the
+game scripts cannot tell it from a person.  It reads only simulation state, so a run is deterministic:
+same seed, same events, same final hash.
+
+Policy, each tick: when the dust devil comes close, release the look button and drag the dust devil
+away from the player in the top view (press, move, release); otherwise hold the right button and turn
+(mouse motion) towards the nearest target, walk towards it when it is far, and press Space when aimed.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from engine.input import InputEvent, InputQueue
+from engine.render.components import Camera, orthographic, perspective, view_matrix
+from engine.spatial import Transform
+from game_demo.scripts.common import GameState, Target, find_named_world
+
+
+@dataclass
+class AutoPilot:
+    look_sensitivity: float = 0.25  # must match the player's Params (degrees per pixel)
+    fire_range: float = 34.0
+    danger_radius: float = 10.0
+    drag_distance: float = 22.0
+    max_turn_px: float = 60.0
+    window: tuple[int, int] = (960, 540)
+    holding: set[str] = field(default_factory=set)
+    drag_plan: list[list[InputEvent]] = field(default_factory=list)
+    fire_cooldown: int = 0
+    mouse: tuple[float, float] = (480.0, 270.0)
+    drags: int = 0
+    shots: int = 0
+
+    def __call__(self, app) -> None:
+        queue = app.world.resource(InputQueue)
+        for event in self.events(app.world):
+            queue.push(event)
+
+    # ---------------------------------------------------------------- helpers
+    def _press(self, key: str, out: list[InputEvent]) -> None:
+        if key not in self.holding:
+            self.holding.add(key)
+            kind = "button_down" if key in ("left", "right") else "key_down"
+            out.append(InputEvent(kind, key, x=self.mouse[0], y=self.mouse[1]))
+
+    def _release(self, key: str, out: list[InputEvent]) -> None:
+        if key in self.holding:
+            self.holding.discard(key)
+            kind = "button_up" if key in ("left", "right") else "key_up"
+            out.append(InputEvent(kind, key, x=self.mouse[0], y=self.mouse[1]))
+
+    def _move_mouse(self, x: float, y: float, out: list[InputEvent]) -> None:
+        out.append(InputEvent("mouse_move", x=x, y=y, dx=x - self.mouse[0], dy=y - self.mouse[1]))
+        self.mouse = (x, y)
+
+    def _turn(self, dx: float, dy: float, out: list[InputEvent]) -> None:
+        """Relative look motion; the cursor is re-centred like a captured mouse."""
+        out.append(InputEvent("mouse_move", x=self.mouse[0], y=self.mouse[1], dx=dx, dy=dy))
+
+    # ------------------------------------------------------------------ policy
+    def events(self, world) -> list[InputEvent]:
+        out: list[InputEvent] = []
+        state = world.try_resource(GameState)
+        player = find_named_world(world, "player")
+        if state is None or player is None or state.phase != "playing":
+            for key in sorted(self.holding):
+                self._release(key, out)
+            return out
+        if self.drag_plan:
+            out.extend(self.drag_plan.pop(0))
+            return out
+        p = world.get(player, Transform)
+        devil = find_named_world(world, "dust_devil")
+        if devil is not None:
+            d = world.get(devil, Transform).position
+            if math.hypot(d[0] - p.position[0], d[2] - p.position[2]) < self.danger_radius:
+                if self._plan_drag(world, p.position, d, out):
+                    return out
+        self._press("right", out)
+        self._hunt(world, p, out)
+        return out
+
+    def _hunt(self, world, p: Transform, out: list[InputEvent]) -> None:
+        targets = [(e, world.get(e, Transform).position) for e, _ in world.query(Target)]
+        if not targets:
+            self._release("w", out)
+            return
+        pos = p.position
+        entity, goal = min(targets, key=lambda t: (math.hypot(t[1][0] - pos[0], t[1][2] - pos[2]), t[0]))
+        dx, dz = goal[0] - pos[0], goal[2] - pos[2]
+        dist = math.hypot(dx, dz)
+        f = p.forward()
+        yaw, pitch = math.atan2(-f[0], -f[2]), math.asin(max(-1.0, min(1.0, f[1])))
+        want_yaw = math.atan2(-dx, -dz)
+        want_pitch = math.atan2(goal[1] - pos[1], dist)
+        err_yaw = (want_yaw - yaw + math.pi) % (2 * math.pi) - math.pi
+        err_pitch = want_pitch - pitch
+        px = float(np.clip(-math.degrees(err_yaw) / self.look_sensitivity, -self.max_turn_px, self.max_turn_px))
+        py = float(np.clip(math.degrees(err_pitch) / self.look_sensitivity, -self.max_turn_px, self.max_turn_px))
+        if abs(px) > 0.01 or abs(py) > 0.01:
+            self._turn(px, py, out)
+        if dist > self.fire_range * 0.8:
+            self._press("w", out)
+        else:
+            self._release("w", out)
+        self.fire_cooldown = max(0, self.fire_cooldown - 1)
+        if "space" in self.holding:
+            self._release("space", out)
+        elif abs(math.degrees(err_yaw)) < 2.5 and dist < self.fire_range and self.fire_cooldown == 0:
+            self._press("space", out)
+            self.fire_cooldown = 20
+            self.shots += 1
+
+    def _plan_drag(self, world, player_pos, devil_pos, out: list[InputEvent]) -> bool:
+        """Press on the dust devil in the top view, move it away from the player, release."""
+        top = find_named_world(world, "top_camera")
+        if top is None:
+            return False
+        away = np.array([devil_pos[0] - player_pos[0], 0.0, devil_pos[2] - player_pos[2]])
+        n = np.linalg.norm(away)
+        away = away / n if n > 1e-6 else np.array([1.0, 0.0, 0.0])
+        goal = devil_pos + away * self.drag_distance
+        start_px = self._to_pixels(world, top, devil_pos)
+        end_px = self._to_pixels(world, top, goal)
+        if start_px is None or end_px is None:
+            return False
+        self._release("right", out)
+        self._release("w", out)
+        self._move_mouse(*start_px, out)
+        self._press("left", out)
+        steps = 6
+        plan = []
+        prev = start_px
+        for i in range(1, steps + 1):
+            cur = (start_px[0] + (end_px[0] - start_px[0]) * i / steps, start_px[1] + (end_px[1] - start_px[1]) * i / steps)
+            plan.append([InputEvent("mouse_move", x=cur[0], y=cur[1], dx=cur[0] - prev[0], dy=cur[1] - prev[1])])
+            prev = cur
+        plan.append([InputEvent("button_up", "left", x=end_px[0], y=end_px[1])])
+        self.mouse = end_px
+        self.holding.discard("left")
+        self.drag_plan = plan
+        self.drags += 1
+        return True
+
+    def _to_pixels(self, world, camera_entity: int, point) -> tuple[float, float] | None:
+        """Window pixel (origin bottom-left) of a world point seen by a camera, or None when outside."""
+        cam = world.get(camera_entity, Camera)
+        t = world.get(camera_entity, Transform)
+        cfg = cam.config
+        w, h = self.window
+        vx, vy, vw, vh = cfg.viewport
+        pw, ph = vw * w, vh * h
+        if cfg.projection == "orthographic":
+            proj = orthographic(cfg.ortho_height, pw / ph, cfg.near, cfg.far)
+        else:
+            proj = perspective(math.radians(cfg.fov), pw / ph, cfg.near, cfg.far)
+        clip = proj @ view_matrix(t) @ np.array([point[0], point[1], point[2], 1.0])
+        ndc = clip[:3] / clip[3]
+        if np.any(np.abs(ndc[:2]) > 0.98):
+            return None
+        return (vx * w + (ndc[0] + 1.0) / 2.0 * pw, vy * h + (ndc[1] + 1.0) / 2.0 * ph)

@@ -1,0 +1,77 @@
+"""Small shared helpers for the demo's scripts (lookups through the public world API)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from engine.builtin import Name, Terrain
+from engine.spatial import Transform
+
+PATTERNS = "ABCDEFGH"
+
+
+@dataclass
+class GameState:
+    """World state resource shared by the demo's scripts."""
+
+    phase: str = "playing"  # playing, won, lost
+    time_left: float = 0.0
+    targets_total: int = 0
+    targets_left: int = 0
+    pattern: str = "A"
+    top_view: str = "minimap"  # minimap or split
+    paused: bool = False
+    message: str = ""
+    destroyed: list[int] = field(default_factory=list)
+
+
+@dataclass
+class Target:
+    """Marks a target; ``hp`` falls as energy-wave impacts arrive."""
+
+    hp: float
+    max_hp: float
+
+
+@dataclass(frozen=True)
+class TargetDestroyed:
+    entity: int
+    position: tuple[float, float, float]
+
+
+def game_state(ctx) -> GameState:
+    state = ctx.world.try_resource(GameState)
+    if state is None:
+        state = GameState()
+        ctx.world.insert_resource(state, state=True)
+    return state
+
+
+def find_named(ctx, name: str) -> int | None:
+    return find_named_world(ctx.world, name)
+
+
+def ground_height(ctx, x: float, z: float) -> float:
+    """Terrain height under (x, z) in world space (0 without terrain)."""
+    for entity, (terrain,) in ctx.query(Terrain):
+        t = ctx.world.try_get(entity, Transform)
+        ox, oy, oz = (t.position if t is not None else np.zeros(3))
+        return float(terrain.field.height_at(np.array([x - ox]), np.array([z - oz]))[0] + oy)
+    return 0.0
+
+
+def terrain_extent(ctx) -> float:
+    """Half the terrain's side length in metres (the playable area), or 50."""
+    for _, (terrain,) in ctx.query(Terrain):
+        return float(min(terrain.field.size)) / 2.0
+    return 50.0
+
+
+def find_named_world(world, name: str) -> int | None:
+    """The lowest-id entity named ``name`` (for code outside scripts, such as the autoplay)."""
+    for entity, (n,) in world.query(Name):
+        if n.value == name:
+            return entity
+    return None
