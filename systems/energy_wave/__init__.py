@@ -1,11 +1,100 @@
-"""The energy_wave effect plugin (being written: registers its components, systems and render passes)."""
+"""The energy_wave plugin (seeds/000): the EnergyWaveEmitter component, its simulation system, script commands
+and (lazily, so the simulation never imports GL) its render feature.
+
+Script commands (``ctx.call(name, ...)``; ``emitter=`` addresses another entity than the script's own):
+
+- ``energy_wave.fire(duration=None, count=None)``: a burst at ``emission_rate`` for ``duration`` seconds
+  (default ``burst_duration``), or ``count`` particles spread over ``burst_duration``;
+- ``energy_wave.set_emitting(emitting=True)``: continuous emission on or off;
+- ``energy_wave.set_pattern(pattern="A")``: apply the shape parameters of one of the patterns A–H;
+- ``energy_wave.configure(**fields)``: change any EnergyWaveEmitter fields (validated; ConfigError on bad values).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from components.energy_wave import PATTERN_PARAMETERS, EnergyWaveEmitter, EnergyWaveState, build_energy_wave
+from engine.config import validate
+from engine.registry import Registry
+from engine.schedule import Stage
+from engine.world import World
+
+from .scripts import PatternCycle
+from .simulate import simulate_system
+
+__all__ = ["plugin", "fire", "set_emitting", "set_pattern", "configure"]
+
+
+def _target(world: World, entity: int, emitter: int | None) -> tuple[int, EnergyWaveEmitter, EnergyWaveState]:
+    target = entity if emitter is None else int(emitter)
+    cfg = world.try_get(target, EnergyWaveEmitter)
+    state = world.try_get(target, EnergyWaveState)
+    if cfg is None or state is None:
+        raise ValueError(f"entity {target} has no EnergyWaveEmitter (pass emitter=<entity> to address another one)")
+    return target, cfg, state
+
+
+def fire(world: World, entity: int, duration: float | None = None, count: int | None = None,
+         emitter: int | None = None) -> None:
+    """Command ``energy_wave.fire``: start a burst (see the module docstring)."""
+    _, cfg, state = _target(world, entity, emitter)
+    if count is not None:
+        if count < 0:
+            raise ValueError(f"energy_wave.fire: count must be >= 0, got {count}")
+        seconds = float(duration) if duration is not None else cfg.burst_duration
+        state.burst_rate = count / seconds
+        state.burst_time_left = seconds
+        return
+    seconds = float(duration) if duration is not None else cfg.burst_duration
+    if not seconds > 0.0:
+        raise ValueError(f"energy_wave.fire: duration must be > 0, got {duration}")
+    state.burst_rate = cfg.emission_rate
+    state.burst_time_left = seconds
+
+
+def set_emitting(world: World, entity: int, emitting: bool = True, emitter: int | None = None) -> None:
+    """Command ``energy_wave.set_emitting``: continuous emission on or off."""
+    _, _, state = _target(world, entity, emitter)
+    state.emitting = bool(emitting)
+
+
+def configure(world: World, entity: int, emitter: int | None = None, **fields: Any) -> EnergyWaveEmitter:
+    """Command ``energy_wave.configure``: replace fields of the emitter's config; raises ConfigError when invalid."""
+    target, cfg, _ = _target(world, entity, emitter)
+    data = {**cfg.model_dump(mode="json", warnings=False), **fields}
+    new = validate(EnergyWaveEmitter, data, f"<energy_wave.configure entity {target}>")
+    world.add(target, new)
+    return new
+
+
+def set_pattern(world: World, entity: int, pattern: str = "A", emitter: int | None = None) -> EnergyWaveEmitter:
+    """Command ``energy_wave.set_pattern``: make every hit particle join ``pattern`` (A–H) from now on."""
+    key = str(pattern).strip().upper()
+    if key not in PATTERN_PARAMETERS:
+        raise ValueError(f"energy_wave.set_pattern: unknown pattern {pattern!r}; expected one of "
+                         f"{', '.join(PATTERN_PARAMETERS)}")
+    return configure(world, entity, emitter=emitter, **PATTERN_PARAMETERS[key])
+
+
+def _make_feature(renderer):
+    from .render import EnergyWaveFeature
+
+    return EnergyWaveFeature(renderer)
 
 
 class _Plugin:
     name = "energy_wave"
 
-    def build(self, registry) -> None:
-        pass
+    def build(self, registry: Registry) -> None:
+        registry.add_component("EnergyWaveEmitter", EnergyWaveEmitter, build_energy_wave, preset_dir="energy_wave")
+        registry.add_system(simulate_system, Stage.SIMULATION, name="energy_wave.simulate")
+        registry.add_command("energy_wave.fire", fire)
+        registry.add_command("energy_wave.set_emitting", set_emitting)
+        registry.add_command("energy_wave.set_pattern", set_pattern)
+        registry.add_command("energy_wave.configure", configure)
+        registry.add_script(PatternCycle)
+        registry.add_render_feature(_make_feature)
 
 
 plugin = _Plugin()

@@ -27,7 +27,7 @@ F32 = NDArray[np.float32]
 
 __all__ = ["PoissonHierarchy", "SolveReport", "build_hierarchy", "solve"]
 
-_COARSEST_CELLS = 512  # stop coarsening at or below this many cells (dense inverse there)
+_COARSEST_CELLS = 64  # stop coarsening at or below this many cells (dense inverse there)
 _SMOOTH_SWEEPS = 2  # red-black Gauss-Seidel sweeps before and after each coarse correction
 
 
@@ -39,11 +39,17 @@ class Level:
     ax: F32  # (nx-1, ny, nz) interior x-face coefficients
     ay: F32  # (nx, ny-1, nz)
     az: F32  # (nx, ny, nz-1)
-    faces: tuple[F32, F32, F32]  # full face arrays incl. boundary planes (for coarsening)
+    faces: tuple[F32, F32, F32]  # full face arrays incl. boundary planes (for coarsening and the velocity update)
+    neighbour_coefficients: tuple[F32, ...]  # per cell: A of its −x, +x, −y, +y, −z, +z face (0 on the border)
+    padded: F32  # (nx+2, ny+2, nz+2) scratch: φ with a ring of zero ghosts
     diag: F32
     inv_diag: F32
     red: NDArray[np.bool_]
     black: NDArray[np.bool_]
+    red_inv_diag: F32  # inv_diag on red cells, 0 elsewhere (the Gauss–Seidel half sweeps as arithmetic blends)
+    black_inv_diag: F32
+    keep_red: F32  # 1 where a red half sweep leaves the value alone (black and inactive cells), else 0
+    keep_black: F32
     active: NDArray[np.bool_]
     dense_inverse: NDArray[np.float64] | None = None  # coarsest level only: pinv of M on the active cells
 
@@ -85,15 +91,30 @@ def face_coefficients(solid: NDArray[np.bool_], open_faces: tuple[bool, bool, bo
 
 def _make_level(ax: F32, ay: F32, az: F32) -> Level:
     nx, ny, nz = ay.shape[0], ax.shape[1], ax.shape[2]
-    diag = ax[:-1] + ax[1:] + ay[:, :-1] + ay[:, 1:] + az[:, :, :-1] + az[:, :, 1:]
+    diag = (ax[:-1] + ax[1:] + ay[:, :-1] + ay[:, 1:] + az[:, :, :-1] + az[:, :, 1:]).astype(np.float32)
     active = diag > 0.0
     inv_diag = np.zeros_like(diag)
     np.divide(1.0, diag, out=inv_diag, where=active)
     i, j, k = np.indices((nx, ny, nz), sparse=True)
     parity = ((i + j + k) & 1).astype(bool)
+    red, black = active & ~parity, active & parity
+    neighbours = []
+    for axis, faces in enumerate((ax, ay, az)):
+        inner = [slice(None)] * 3
+        for lo in (True, False):
+            c = np.array(faces, dtype=np.float32)
+            inner[axis] = slice(0, -1) if lo else slice(1, None)
+            c = c[tuple(inner)].copy()
+            border = [slice(None)] * 3
+            border[axis] = 0 if lo else -1
+            c[tuple(border)] = 0.0  # the ghost beyond an open face holds φ = 0: only the diagonal sees that face
+            neighbours.append(c)
+    f32 = np.float32
     return Level((nx, ny, nz), np.ascontiguousarray(ax[1:-1]), np.ascontiguousarray(ay[:, 1:-1]),
-                 np.ascontiguousarray(az[:, :, 1:-1]), (ax, ay, az), diag.astype(np.float32),
-                 inv_diag.astype(np.float32), active & ~parity, active & parity, active)
+                 np.ascontiguousarray(az[:, :, 1:-1]), (ax, ay, az), tuple(neighbours),
+                 np.zeros((nx + 2, ny + 2, nz + 2), f32), diag, inv_diag.astype(f32), red, black,
+                 (inv_diag * red).astype(f32), (inv_diag * black).astype(f32), (~red).astype(f32),
+                 (~black).astype(f32), active)
 
 
 def _coarsen(level: Level) -> Level:
@@ -126,7 +147,7 @@ def _dense_operator(level: Level) -> NDArray[np.float64]:
 
 
 def build_hierarchy(solid: NDArray[np.bool_], open_faces: tuple[bool, ...]) -> PoissonHierarchy:
-    """Levels from the fine solid mask down to ≤ 512 cells (halving while every side is even and ≥ 4)."""
+    """Levels from the fine solid mask down to ≤ 64 cells (halving while every side is even and ≥ 4)."""
     level = _make_level(*face_coefficients(solid, tuple(open_faces)))
     levels = [level]
     while (np.prod(level.shape) > _COARSEST_CELLS and all(n % 2 == 0 and n >= 4 for n in level.shape)):
@@ -141,13 +162,15 @@ def build_hierarchy(solid: NDArray[np.bool_], open_faces: tuple[bool, ...]) -> P
 
 def _neighbour_sum(level: Level, phi: F32) -> F32:
     """Σ_f A_f φ_nb(f) over the interior faces (ghost cells beyond the domain hold 0)."""
-    s = np.zeros_like(phi)
-    s[1:] += level.ax * phi[:-1]
-    s[:-1] += level.ax * phi[1:]
-    s[:, 1:] += level.ay * phi[:, :-1]
-    s[:, :-1] += level.ay * phi[:, 1:]
-    s[:, :, 1:] += level.az * phi[:, :, :-1]
-    s[:, :, :-1] += level.az * phi[:, :, 1:]
+    buf = level.padded
+    buf[1:-1, 1:-1, 1:-1] = phi
+    cxm, cxp, cym, cyp, czm, czp = level.neighbour_coefficients
+    s = cxm * buf[:-2, 1:-1, 1:-1]
+    s += cxp * buf[2:, 1:-1, 1:-1]
+    s += cym * buf[1:-1, :-2, 1:-1]
+    s += cyp * buf[1:-1, 2:, 1:-1]
+    s += czm * buf[1:-1, 1:-1, :-2]
+    s += czp * buf[1:-1, 1:-1, 2:]
     return s
 
 
@@ -156,18 +179,27 @@ def apply_operator(level: Level, phi: F32) -> F32:
     return level.diag * phi - _neighbour_sum(level, phi)
 
 
-def _smooth(level: Level, phi: F32, b: F32, order: tuple[str, str]) -> None:
-    """Red–black Gauss–Seidel: update all red cells from their (black) neighbours, then all black cells."""
+def _smooth(level: Level, phi: F32, b: F32, order: tuple[str, str]) -> F32:
+    """Red–black Gauss–Seidel: update all red cells from their (black) neighbours, then all black cells.
+
+    Each half sweep is φ ← keep·φ + inv_diag_colour·(b + Σ A φ_nb), an arithmetic blend (no boolean scatter).
+    """
     for colour in order:
-        mask = level.red if colour == "red" else level.black
-        update = (b + _neighbour_sum(level, phi)) * level.inv_diag
-        np.copyto(phi, update, where=mask)
+        if colour == "red":
+            keep, scale = level.keep_red, level.red_inv_diag
+        else:
+            keep, scale = level.keep_black, level.black_inv_diag
+        phi = keep * phi + scale * (b + _neighbour_sum(level, phi))
+    return phi
 
 
 def _restrict(r: F32) -> F32:
     """Coarse right-hand side: 4 × the mean of the 8 children (the (2h)²/h² scaling of the 7-point Laplacian)."""
-    nx, ny, nz = r.shape
-    return 0.5 * r.reshape(nx // 2, 2, ny // 2, 2, nz // 2, 2).sum(axis=(1, 3, 5), dtype=np.float32)
+    s = r[0::2] + r[1::2]
+    s = s[:, 0::2] + s[:, 1::2]
+    s = s[:, :, 0::2] + s[:, :, 1::2]
+    s *= np.float32(0.5)
+    return s
 
 
 def _prolong(e: F32) -> F32:
@@ -185,14 +217,15 @@ def v_cycle(hierarchy: PoissonHierarchy, b: F32, depth: int = 0) -> F32:
         cells = level.active
         x[cells] = (level.dense_inverse @ b[cells].astype(np.float64)).astype(np.float32)
         return x
-    x = np.zeros_like(b)
-    for _ in range(_SMOOTH_SWEEPS):
-        _smooth(level, x, b, ("red", "black"))
+    x = level.red_inv_diag * b  # the first red half sweep from φ = 0 needs no neighbours
+    x = _smooth(level, x, b, ("black",))
+    for _ in range(_SMOOTH_SWEEPS - 1):
+        x = _smooth(level, x, b, ("red", "black"))
     residual = np.where(level.active, b - apply_operator(level, x), np.float32(0.0))
-    x += _prolong(v_cycle(hierarchy, _restrict(residual), depth + 1))
+    x = x + _prolong(v_cycle(hierarchy, _restrict(residual), depth + 1))
     x[~level.active] = 0.0
     for _ in range(_SMOOTH_SWEEPS):
-        _smooth(level, x, b, ("black", "red"))
+        x = _smooth(level, x, b, ("black", "red"))
     return x
 
 

@@ -1,0 +1,125 @@
+"""Crawfis' tornado vector field (section 2.1 of seeds/004) on the field grid, and velocity lookup.
+
+Two frames meet here:
+
+* Crawfis' unit cube (cx, cy, cz), z up, in which ``gen_tornado`` is written;
+* the field box in engine convention: field space is metres with the origin at the centre of the box's bottom
+  face, +y up, x in [-Sx/2, Sx/2], y in [0, Sy], z in [-Sz/2, Sz/2].
+
+They are related by the proper rotation cx = ux, cy = 1 - uz, cz = uy (u = the box's unit coordinates), so
+"clockwise seen from above" means the same in both.  All trigonometry is float64 (determinism rule).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = ["crawfis_tornado", "centre_line", "wind_grid", "sample_wind", "to_unit", "grid_points"]
+
+F64 = NDArray[np.float64]
+SMALL = 1e-11  # Crawfis' SMALL
+
+
+def centre_line(cz: ArrayLike, t: float, rotation: float = 0.0) -> tuple[F64, F64]:
+    """Vortex centre (xc, yc) of each z-slice, turned clockwise (seen from above) by ``rotation`` radians about
+    the box's vertical axis (0.5, 0.5) (2.2, seeds/004):
+
+        xc = 0.5 + 0.1 sin(0.04 t + 10 z),   yc = 0.5 + 0.1 cos(0.03 t + 3 z)
+    """
+    cz = np.asarray(cz, dtype=np.float64)
+    ox = 0.1 * np.sin(0.04 * t + 10.0 * cz)
+    oy = 0.1 * np.cos(0.03 * t + 3.0 * cz)
+    if rotation:
+        c, s = np.cos(np.float64(rotation)), np.sin(np.float64(rotation))
+        ox, oy = c * ox + s * oy, -s * ox + c * oy  # clockwise about +z: +x turns towards -y
+    return 0.5 + ox, 0.5 + oy
+
+
+def crawfis_tornado(cx: ArrayLike, cy: ArrayLike, cz: ArrayLike, t: float, rotation: float = 0.0) -> F64:
+    """Crawfis' ``gen_tornado`` at points of the unit cube, time ``t``; returns (..., 3) in Crawfis axes.
+
+        r  = 0.1 + 0.4 z² + 0.1 z sin(8 z),  r2 = 0.2 + 0.1 z,  d = |(x, y) - (xc, yc)|
+        s  = |r - d|;  s = 0.8 - s if s > r2 else 1
+        z0 = max(0.1 (0.1 - d z), 0);  d = sqrt(d² + z0²)
+        s  = (r + r2 - d) s / (d + 1e-11) / (1 + z)
+        v  = (s (y - yc) + 0.1 (x - xc), -s (x - xc) + 0.1 (y - yc), s z0)
+    """
+    cx, cy, cz = (np.asarray(a, dtype=np.float64) for a in (cx, cy, cz))  # broadcast lazily: per-slice
+    xc, yc = centre_line(cz, t, rotation)  # terms stay the size of cz
+    r = 0.1 + 0.4 * cz * cz + 0.1 * cz * np.sin(8.0 * cz)
+    r2 = 0.2 + 0.1 * cz
+    dx, dy = cx - xc, cy - yc
+    d = np.sqrt(dx * dx + dy * dy)
+    s = np.abs(r - d)
+    s = np.where(s > r2, 0.8 - s, 1.0)  # the discontinuity its author did not like
+    z0 = np.maximum(0.1 * (0.1 - d * cz), 0.0)
+    d = np.sqrt(d * d + z0 * z0)
+    s = (r + r2 - d) * s / (d + SMALL)
+    s = s / (1.0 + cz)
+    out = np.empty(np.broadcast_shapes(cx.shape, cy.shape, cz.shape) + (3,))
+    out[..., 0] = s * dy + 0.1 * dx
+    out[..., 1] = -s * dx + 0.1 * dy
+    out[..., 2] = s * z0
+    return out
+
+
+def grid_points(resolution: tuple[int, int, int]) -> tuple[F64, F64, F64]:
+    """Unit coordinates (ux, uy, uz) of the grid points: i / (n - 1) along each axis, as in gen_tornado."""
+    return tuple(np.arange(n, dtype=np.float64) / (n - 1) for n in resolution)  # type: ignore[return-value]
+
+
+def wind_grid(resolution: tuple[int, int, int], size: ArrayLike, t: float, rotation: float,
+              wind_scale: float) -> F64:
+    """The field on the grid as field-space velocities in m/s, shape (nx, ny, nz, 3), index [ix, iy(up), iz].
+
+    Crawfis' vector (vx, vy, vz) in unit-cube lengths per time becomes (vx Sx, vz Sy, -vy Sz) · wind_scale.
+    """
+    ux, uy, uz = grid_points(resolution)
+    # engine axes [ix, iy (up), iz] -> Crawfis (x, z, y = 1 - uz), as broadcastable 1-D axes
+    v = crawfis_tornado(ux[:, None, None], (1.0 - uz)[None, None, :], uy[None, :, None], t, rotation)
+    size = np.asarray(size, dtype=np.float64)
+    out = np.empty_like(v)
+    out[..., 0] = v[..., 0] * size[0]
+    out[..., 1] = v[..., 2] * size[1]
+    out[..., 2] = -v[..., 1] * size[2]
+    return out * wind_scale
+
+
+def to_unit(points: F64, size: ArrayLike) -> F64:
+    """Field-space metres (N, 3) to the box's unit coordinates (ux, uy, uz) in [0, 1]³ inside the box."""
+    size = np.asarray(size, dtype=np.float64)
+    u = points / size
+    u[:, 0] += 0.5
+    u[:, 2] += 0.5
+    return u
+
+
+def sample_wind(grid: F64, unit: F64, mode: str = "nearest") -> F64:
+    """Velocity (N, 3) at unit coordinates (N, 3) clamped into the box.
+
+    ``nearest``: the vector of the nearest grid point (2.1, seeds/004); ``trilinear``: interpolation of the 8
+    surrounding grid points.
+    """
+    dims = np.array(grid.shape[:3])
+    g = np.clip(unit, 0.0, 1.0) * (dims - 1)
+    if mode == "nearest":
+        i = np.rint(g).astype(np.intp)
+        return np.take(grid.reshape(-1, 3), (i[:, 0] * dims[1] + i[:, 1]) * dims[2] + i[:, 2], axis=0)
+    if mode != "trilinear":
+        raise ValueError(f"unknown lookup mode {mode!r}; expected 'nearest' or 'trilinear'")
+    i0 = np.minimum(np.floor(g).astype(np.intp), dims - 2)
+    f = g - i0
+    flat = grid.reshape(-1, 3)
+    sx, sy = dims[1] * dims[2], dims[2]  # strides of ix, iy in the flattened grid (iz stride 1)
+    base = i0[:, 0] * sx + i0[:, 1] * sy + i0[:, 2]
+    fx, fy, fz = f[:, 0:1], f[:, 1:2], f[:, 2:3]
+
+    def lerp_x(offset: int) -> F64:
+        a = np.take(flat, base + offset, axis=0)
+        return a + (np.take(flat, base + offset + sx, axis=0) - a) * fx
+
+    c00, c10, c01, c11 = lerp_x(0), lerp_x(sy), lerp_x(1), lerp_x(sy + 1)
+    c0 = c00 + (c10 - c00) * fy
+    c1 = c01 + (c11 - c01) * fy
+    return c0 + (c1 - c0) * fz

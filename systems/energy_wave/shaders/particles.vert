@@ -1,0 +1,49 @@
+#version 330
+// Energy-wave sprites (seeds/000, section 3.4), expanded on the GPU from one record per particle.
+// Records live in an RGBA32F texture, three texels each: (position, alpha), (hit point P0, -), (direction d, -).
+// Instance k of a draw is sprite j = k % sprites of particle first + k / sprites:
+//   mode 0: one sprite at the particle (beam particles, grains);
+//   mode 1: continuous trail, eq. 3.7: T_j = P0 + (P1 - P0) j / M, size shrinking towards P1;
+//   mode 2: bar, eq. 3.8: U_j = Q + (-1)^(j+1) u j d, and tip size eq. 3.9: S_j = (N - j (1 - t)) / N S
+// (j counted from 0 here, j - 1 in the thesis).
+uniform sampler2D records;
+uniform int records_per_row;
+uniform mat4 view_proj;
+uniform vec3 camera_right;
+uniform vec3 camera_up;
+uniform int first;
+uniform int sprites;
+uniform int mode;
+uniform float size;          // S, metres
+uniform float spacing;       // u * S, metres
+uniform float roundness;     // t
+uniform float trail_end;     // size factor of the last trail sprite
+in vec2 in_corner;
+out vec2 v_uv;
+out float v_alpha;
+
+vec4 fetch(int particle, int texel) {
+    return texelFetch(records, ivec2((particle % records_per_row) * 3 + texel, particle / records_per_row), 0);
+}
+
+void main() {
+    int particle = first + gl_InstanceID / sprites;
+    int j = gl_InstanceID % sprites;
+    vec4 a = fetch(particle, 0);
+    vec3 pos = a.xyz;
+    float s = size;
+    if (mode == 1) {
+        vec3 p0 = fetch(particle, 1).xyz;
+        pos = p0 + (a.xyz - p0) * (float(j) / float(sprites));
+        s *= sprites > 1 ? mix(1.0, trail_end, float(j) / float(sprites - 1)) : 1.0;
+    } else if (mode == 2) {
+        vec3 d = fetch(particle, 2).xyz;
+        float side = (j % 2 == 1) ? 1.0 : -1.0;
+        pos = a.xyz + side * spacing * float(j) * d;
+        s *= (float(sprites) - float(j) * (1.0 - roundness)) / float(sprites);
+    }
+    v_uv = in_corner * 0.5 + 0.5;
+    v_alpha = a.w;
+    vec3 world = pos + (camera_right * in_corner.x + camera_up * in_corner.y) * s;
+    gl_Position = view_proj * vec4(world, 1.0);
+}

@@ -1,0 +1,442 @@
+"""Per-step simulation of energy-wave emitters (seeds/000), pure numpy, no GL.
+
+One fixed step of one emitter:
+
+1. age every particle; irregular particles steer so they reach their control point E exactly when their lifetime τ
+   runs out (eq. 3.5: v = (E − H)/τ while E stays put); circular particles keep the velocity A·(1 frame) that the
+   collision gave them (eq. 3.4);
+2. beam particles sweep their segment x → x + v·dt against every collider (boxes, spheres, planes, height fields,
+   via ``Collider.ray_cast``); the first hit stops the particle at the surface point H and decides its pattern
+   (eqs. 3.1, 3.6, N and t) and its motion (eq. 3.2–3.4 or 3.5); particles that miss fly on and can hit another
+   collider later (fig. 4.7);
+3. emission: new beam particles spread evenly over the step along the beam;
+4. dead particles (age > lifetime) are removed by swapping the tail into their slots (O(dead));
+5. one ``Impact`` and one ``EnergyWaveHit`` event per (emitter, collider) hit this step.
+
+Sign conventions (the printed eqs. 3.2 and 3.3 point the damper and the "repulsion" inwards):
+D = k z n − h (w·n) n (the damper opposes the normal velocity, so a particle entering the surface is pushed out);
+R = r Σ (P − Q_i)/|P − Q_i|² (away from the neighbours), with the part of R that points into the surface removed
+(the surface holds it). A = c (D + R)/|D + R| is the acceleration "at the collision": it acts during the collision
+frame (1/60 s), so the particle leaves H with velocity A·frame, of speed c (c in m/s per frame), and keeps it.
+The incoming beam velocity is absorbed by the hit.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from components.energy_wave import (BEAM, FRAME, PATTERNS, ROUND_THRESHOLD, EnergyWaveEmitter, EnergyWaveHit,
+                                    EnergyWaveState, ParticleBuffer)
+from engine.collider import Collider
+from engine.impacts import Impact
+from engine.noise import PerlinNoise
+from engine.spatial import Transform, quat_rotate, quat_to_matrix
+from engine.world import World
+
+from .neighbours import neighbour_repulsion
+
+F64 = NDArray[np.float64]
+
+NEIGHBOUR_SAMPLE_LIMIT = 16  # per hashed cell: crowded cells are sampled (unbiased) so cost stays bounded
+_EPS = 1e-12
+
+
+@dataclass
+class ColliderEntry:
+    """A collider the beam can hit, with its transform and a world-space bounding box (None: unbounded)."""
+
+    entity: int
+    collider: Collider
+    transform: Transform
+    lo: F64 | None
+    hi: F64 | None
+
+
+# ----------------------------------------------------------------------------------------------------- colliders
+def collider_bounds(collider: Collider, transform: Transform) -> tuple[F64 | None, F64 | None]:
+    """World axis-aligned bounds of a collider's solid (None, None when unbounded: planes, rotated terrain)."""
+    if collider.shape == "box":
+        h = collider.half_extents * np.abs(transform.scale)
+        extent = np.abs(quat_to_matrix(transform.rotation)) @ h
+        return transform.position - extent, transform.position + extent
+    if collider.shape == "sphere":
+        r = collider.radius * float(np.max(np.abs(transform.scale)))
+        return transform.position - r, transform.position + r
+    if collider.shape == "heightfield" and np.allclose(transform.rotation, (1.0, 0.0, 0.0, 0.0)):
+        # Solid below the surface; outside its footprint the field is extruded, so only the top is bounded.
+        top = collider.heightfield.height_range[1] + transform.position[1]
+        return np.full(3, -np.inf), np.array([np.inf, top, np.inf])
+    return None, None
+
+
+def gather_colliders(world: World, emitter: int, layers: list[str]) -> list[ColliderEntry]:
+    """Every entity with Transform + Collider except the emitter itself, ascending by entity id."""
+    out = []
+    for entity, (transform, collider) in world.query(Transform, Collider):
+        if entity == emitter or (layers and collider.layer not in layers):
+            continue
+        lo, hi = collider_bounds(collider, transform)
+        out.append(ColliderEntry(entity, collider, transform, lo, hi))
+    return out
+
+
+@dataclass
+class SweepResult:
+    """First solid hit of each swept segment (collider index -1: none) and trigger entries."""
+
+    t: F64
+    collider: NDArray[np.int64]
+    normal: F64
+    triggers: list[tuple[int, NDArray[np.int64], F64]]  # (collider index, segment rows, entry points)
+
+
+def sweep(p0: F64, p1: F64, colliders: list[ColliderEntry]) -> SweepResult:
+    """Ray-cast the segments p0 → p1 against every collider; keep the first solid hit per segment."""
+    n = len(p0)
+    best_t = np.full(n, np.inf)
+    best_c = np.full(n, -1, dtype=np.int64)
+    best_n = np.zeros((n, 3))
+    seg = p1 - p0
+    seg_lo, seg_hi = np.minimum(p0, p1), np.maximum(p0, p1)
+    trigger_hits = []
+    for index, entry in enumerate(colliders):  # loop over colliders, vectorized over particles
+        if entry.lo is None:
+            rows = np.arange(n)
+        else:
+            rows = np.flatnonzero(np.all((seg_hi >= entry.lo) & (seg_lo <= entry.hi), axis=1))
+        if rows.size == 0:
+            continue
+        hit, t, normal = entry.collider.ray_cast(p0[rows], seg[rows], entry.transform, max_t=1.0)
+        if entry.collider.is_trigger:
+            enter = hit & (t > 0.0)
+            trigger_hits.append((index, rows[enter], t[enter]))
+            continue
+        better = hit & (t < best_t[rows])
+        rows = rows[better]
+        best_t[rows], best_c[rows], best_n[rows] = t[better], index, normal[better]
+    triggers = []
+    for index, rows, t in trigger_hits:  # a trigger behind a solid hit in the same step is not reached
+        keep = t <= best_t[rows]
+        rows, t = rows[keep], t[keep]
+        if rows.size:
+            triggers.append((index, rows, p0[rows] + t[:, None] * seg[rows]))
+    return SweepResult(best_t, best_c, best_n, triggers)
+
+
+# ------------------------------------------------------------------------------------------------- the equations
+def penalty_drag(depth: F64, normal: F64, velocity: F64, spring: float, damper: float) -> F64:
+    """Drag D of the object (eq. 3.2, penalty method): D = k z n − h (w·n) n.
+
+    The thesis prints + h (w·n) n; for a particle entering the surface (w·n < 0) that points inwards, so the
+    damper here opposes the normal velocity as a penalty damper does: both terms push out of the object.
+    """
+    wn = np.einsum("ij,ij->i", velocity, normal)
+    return (spring * depth - damper * wn)[:, None] * normal
+
+
+def collision_acceleration(drag: F64, repulsion: F64, normal: F64, magnitude: F64) -> F64:
+    """A = c (D + R)/|D + R| (eq. 3.4): same magnitude c for every particle, direction from D + R.
+
+    The inward normal part of R is dropped first (the surface holds the particle against neighbours that splashed
+    off before it); when D + R ≈ 0 the direction falls back to the surface normal n.
+    """
+    inward = np.minimum(np.einsum("ij,ij->i", repulsion, normal), 0.0)
+    total = drag + repulsion - inward[:, None] * normal
+    length = np.sqrt(np.einsum("ij,ij->i", total, total))
+    safe = length > 1e-9
+    direction = np.where(safe[:, None], total / np.where(safe, length, 1.0)[:, None], normal)
+    return magnitude[:, None] * direction
+
+
+def assign_patterns(u_circular: F64, u_continuous: F64, alpha: float, beta: float, samples: int,
+                    roundness: float) -> NDArray[np.int8]:
+    """Pattern code 0..7 (= A..H) of hit particles from two uniform draws each (section 3.2).
+
+    Circular with probability α (eq. 3.1), continuous with probability β (eq. 3.6); separated particles are grains
+    when N = 1, bars when N > 1; bars are round when t >= 0.5, sharp below (the tip shape itself follows t
+    continuously through eq. 3.9 when drawn).
+    """
+    irregular = (u_circular >= alpha).astype(np.int8)
+    if samples <= 1:
+        separated_kind = 1
+    else:
+        separated_kind = 2 if roundness >= ROUND_THRESHOLD else 3
+    kind = np.where(u_continuous < beta, 0, separated_kind).astype(np.int8)
+    return (2 * kind + irregular).astype(np.int8)
+
+
+def is_circular(pattern: NDArray[np.int8]) -> NDArray[np.bool_]:
+    return (pattern >= 0) & (pattern % 2 == 0)
+
+
+def is_irregular(pattern: NDArray[np.int8]) -> NDArray[np.bool_]:
+    return (pattern >= 0) & (pattern % 2 == 1)
+
+
+def bar_offsets(samples: int, spacing: float) -> F64:
+    """Offsets of a bar's sprites along d (eq. 3.8): U_j = Q + (−1)^j u (j − 1) d, j = 1..N (units of u·S)."""
+    j = np.arange(1, samples + 1)
+    return np.where(j % 2 == 0, 1.0, -1.0) * spacing * (j - 1)
+
+
+def bar_sizes(samples: int, roundness: float) -> F64:
+    """Relative sprite sizes of a bar (eq. 3.9): S_j / S = (N − (j − 1)(1 − t)) / N, j = 1..N."""
+    j = np.arange(1, samples + 1)
+    return (samples - (j - 1) * (1.0 - roundness)) / samples
+
+
+def trail_fractions(textures: int) -> F64:
+    """Positions of a continuous trail's sprites (eq. 3.7): T_i = P0 + (P1 − P0)(i − 1)/M, i = 1..M."""
+    return np.arange(textures) / textures
+
+
+def trail_sizes(textures: int, end_scale: float) -> F64:
+    """Relative sizes along a trail: 1 at P0 shrinking linearly to ``end_scale`` at the last sprite."""
+    if textures == 1:
+        return np.ones(1)
+    return 1.0 - (1.0 - end_scale) * np.arange(textures) / (textures - 1)
+
+
+# ------------------------------------------------------------------------------------------------ control points
+def control_point_offsets(cfg: EnergyWaveEmitter, time: float, noise: PerlinNoise) -> F64:
+    """Control points E_k (K, 3) in the wave frame at ``time``: keyframes (linear, optional loop) plus Perlin jitter."""
+    out = np.zeros((len(cfg.control_points), 3))
+    for k, cp in enumerate(cfg.control_points):  # loop over control points (at most 16)
+        if cp.keyframes:
+            times = np.array([key.time for key in cp.keyframes])
+            positions = np.array([key.position for key in cp.keyframes])
+            t = time % times[-1] if cp.loop else time
+            out[k] = [np.interp(t, times, positions[:, a]) for a in range(3)]
+        else:
+            out[k] = cp.position
+        if cp.noise_amplitude > 0.0:
+            jitter = noise.noise3(np.full(3, cp.noise_frequency * time), np.full(3, 7.31 * k + 0.5),
+                                  np.array([0.25, 3.75, 7.25]))
+            out[k] += cp.noise_amplitude * jitter
+    return out
+
+
+def _noise(state: EnergyWaveState) -> PerlinNoise:
+    if state.noise_cache is None or state.noise_cache.seed != state.noise_seed:
+        state.noise_cache = PerlinNoise(state.noise_seed)
+    return state.noise_cache
+
+
+# ------------------------------------------------------------------------------------------------------ the step
+def _remove_dead(buf: ParticleBuffer, dead: NDArray[np.bool_]) -> int:
+    """Remove particles flagged ``dead`` (over the live range) by moving live tail particles into their slots."""
+    n = buf.count
+    gone = np.flatnonzero(dead)
+    if gone.size == 0:
+        return 0
+    keep = n - gone.size
+    holes = gone[gone < keep]
+    movers = keep + np.flatnonzero(~dead[keep:n])
+    for array in buf.arrays():
+        array[holes] = array[movers]
+    buf.count = keep
+    return int(gone.size)
+
+
+def _disc_offsets(rng: np.random.Generator, count: int, radius: float, right: F64, up: F64) -> F64:
+    """Uniform points on the beam's cross-section disc (float64 sin/cos for cross-machine determinism)."""
+    r = radius * np.sqrt(rng.random(count))
+    theta = 2.0 * np.pi * rng.random(count)
+    return (r * np.cos(theta))[:, None] * right + (r * np.sin(theta))[:, None] * up
+
+
+def emit(cfg: EnergyWaveEmitter, state: EnergyWaveState, transform: Transform, rng: np.random.Generator,
+         dt: float) -> int:
+    """Spawn this step's beam particles, spread evenly along the distance the beam covers in one step."""
+    rate = (cfg.emission_rate if state.emitting else 0.0)
+    burst = min(state.burst_time_left, dt)
+    wanted = state.emit_carry + rate * dt + state.burst_rate * burst
+    state.burst_time_left = max(0.0, state.burst_time_left - dt)
+    if state.burst_time_left == 0.0:
+        state.burst_rate = 0.0
+    count = int(np.floor(wanted))
+    state.emit_carry = wanted - count
+    buf = state.particles
+    room = buf.capacity - buf.count
+    if count > room:
+        state.dropped += count - room
+        count = room
+    if count <= 0:
+        return 0
+    axes = quat_to_matrix(transform.rotation)  # columns: right (+x), up (+y), back (+z)
+    right, up, forward = axes[:, 0], axes[:, 1], -axes[:, 2]
+    phase = (np.arange(count) + rng.random(count)) / count  # stratified over the step
+    s = slice(buf.count, buf.count + count)
+    buf.position[s] = (transform.position + _disc_offsets(rng, count, cfg.beam_radius, right, up)
+                       + (phase * cfg.beam_speed * dt)[:, None] * forward)
+    buf.velocity[s] = cfg.beam_speed * forward
+    buf.hit_point[s] = buf.position[s]
+    buf.acceleration[s] = 0.0
+    buf.target_offset[s] = 0.0
+    buf.age[s] = phase * dt
+    buf.lifetime[s] = cfg.beam_range / cfg.beam_speed
+    buf.pattern[s] = BEAM
+    buf.control[s] = 0
+    buf.count += count
+    state.emitted += count
+    return count
+
+
+def _ball(rng: np.random.Generator, count: int) -> F64:
+    """Uniform points in the unit ball."""
+    g = rng.standard_normal((count, 3))
+    g /= np.maximum(np.linalg.norm(g, axis=1, keepdims=True), _EPS)
+    return g * np.cbrt(rng.random(count))[:, None]
+
+
+def _hit(cfg: EnergyWaveEmitter, state: EnergyWaveState, rng: np.random.Generator, rows: NDArray[np.int64],
+         point: F64, normal: F64, depth: F64) -> None:
+    """Turn the beam particles ``rows`` into splash particles at their hit points (sections 3.2–3.3)."""
+    buf = state.particles
+    n = len(rows)
+    w = buf.velocity[rows].copy()
+    u = rng.random((n, 5))
+    pattern = assign_patterns(u[:, 0], u[:, 1], cfg.circular_probability, cfg.continuity_probability,
+                              cfg.splash_samples, cfg.splash_roundness)
+    lifetime = np.maximum(cfg.lifetime_frames + cfg.lifetime_spread * (2.0 * u[:, 2] - 1.0), 1.0) * FRAME
+    continuous = pattern < 2
+    c = np.where(continuous, cfg.acceleration_continuous, cfg.acceleration_separated)
+    spread = np.where(continuous, cfg.acceleration_continuous_spread, cfg.acceleration_separated_spread)
+    c = np.maximum(c + spread * (2.0 * u[:, 3] - 1.0), 0.0) / FRAME  # (m/s per frame) -> m/s²
+    # Irregular: pick a control point by its probability, and a random offset within its spread.
+    control = np.zeros(n, dtype=np.int8)
+    offset = np.zeros((n, 3))
+    if cfg.control_points:
+        weights = np.array([cp.probability for cp in cfg.control_points])
+        cumulative = np.cumsum(weights) / weights.sum()
+        control = np.minimum(np.searchsorted(cumulative, u[:, 4], side="right"), len(weights) - 1).astype(np.int8)
+        radii = np.array([cp.spread for cp in cfg.control_points])
+        offset = _ball(rng, n) * radii[control][:, None]
+    # Circular: A from the drag D (eq. 3.2) and the neighbours' repulsion R (eq. 3.3), eq. 3.4.
+    acceleration = np.zeros((n, 3))
+    circ = np.flatnonzero(pattern % 2 == 0)
+    if circ.size:
+        unit = cfg.equation_unit  # D and R in the paper's units: lengths in `unit`, velocities per frame
+        drag = penalty_drag(depth[circ] / unit, normal[circ], w[circ] * (FRAME / unit), cfg.spring, cfg.damper)
+        # Neighbours: every particle already hit (``rows`` are still BEAM in the buffer) and this step's hits.
+        neighbours = np.concatenate([buf.position[: buf.count], point])
+        settled = np.concatenate([buf.pattern[: buf.count] >= 0, np.ones(n, dtype=bool)])
+        repulsion = neighbour_repulsion(point[circ], neighbours, cfg.repulsion_radius, cfg.repulsion * unit,
+                                        NEIGHBOUR_SAMPLE_LIMIT, settled)
+        acceleration[circ] = collision_acceleration(drag, repulsion, normal[circ], c[circ])
+    buf.position[rows] = point
+    buf.hit_point[rows] = point
+    buf.velocity[rows] = acceleration * FRAME  # A acts during the collision frame; irregular ones start at rest
+    buf.acceleration[rows] = acceleration
+    buf.target_offset[rows] = offset
+    buf.age[rows] = 0.0
+    buf.lifetime[rows] = lifetime
+    buf.pattern[rows] = pattern
+    buf.control[rows] = control
+    state.hits_per_pattern += np.bincount(pattern, minlength=len(PATTERNS))
+
+
+def _send_events(world: World, emitter: int, colliders: list[ColliderEntry], which: NDArray[np.int64],
+                 point: F64, normal: F64, velocity: F64, mass: float, trigger: bool = False) -> None:
+    """One Impact (solid colliders) and one EnergyWaveHit per collider hit this step: aggregated, not per particle."""
+    for index in np.unique(which):  # loop over the colliders that were hit
+        sel = which == index
+        count = int(sel.sum())
+        mean_point = point[sel].mean(axis=0)
+        mean_normal = normal[sel].sum(axis=0)
+        mean_normal = mean_normal / max(float(np.linalg.norm(mean_normal)), _EPS)
+        impulse = mass * velocity[sel].sum(axis=0)
+        energy = 0.5 * mass * float(np.einsum("ij,ij->", velocity[sel], velocity[sel]))
+        target = colliders[int(index)].entity
+        p, i, nn = tuple(map(float, mean_point)), tuple(map(float, impulse)), tuple(map(float, mean_normal))
+        if not trigger:
+            world.events.send(Impact(target, p, i, source=emitter, kind="energy_wave"))
+        world.events.send(EnergyWaveHit(emitter, target, p, nn, i, energy, count, trigger))
+
+
+def _steer_irregular(cfg: EnergyWaveEmitter, state: EnergyWaveState, transform: Transform, dt: float) -> None:
+    """Irregular particles aim at their control point so that they arrive when τ runs out (eq. 3.5)."""
+    buf = state.particles
+    n = buf.count
+    irregular = np.flatnonzero(is_irregular(buf.pattern[:n]))
+    if irregular.size == 0 or not cfg.control_points:
+        return
+    local = control_point_offsets(cfg, state.time, _noise(state))
+    world_offsets = quat_rotate(transform.rotation, local)
+    control = np.minimum(buf.control[irregular], len(local) - 1)  # the config may have lost points since
+    target = buf.hit_point[irregular] + world_offsets[control] + buf.target_offset[irregular]
+    remaining = np.maximum(buf.lifetime[irregular] - buf.age[irregular] + dt, dt)  # age already advanced
+    buf.velocity[irregular] = (target - buf.position[irregular]) / remaining[:, None]
+
+
+def _collide_beam(world: World, entity: int, cfg: EnergyWaveEmitter, state: EnergyWaveState,
+                  rng: np.random.Generator, beam: NDArray[np.int64], start: F64) -> None:
+    """Beam particles ``beam`` moved from ``start`` this step: stop the ones that hit, report hits and triggers."""
+    colliders = gather_colliders(world, entity, cfg.collision_layers)
+    if not colliders:
+        return
+    buf = state.particles
+    end = buf.position[beam]
+    incoming = buf.velocity[beam].copy()
+    result = sweep(start, end, colliders)
+    for index, rows, points in result.triggers:
+        _send_events(world, entity, colliders, np.full(len(rows), index), points,
+                     -incoming[rows] / max(cfg.beam_speed, _EPS), incoming[rows], cfg.particle_mass, trigger=True)
+    hit = np.flatnonzero(result.collider >= 0)
+    if hit.size == 0:
+        return
+    point = start[hit] + result.t[hit, None] * (end[hit] - start[hit])
+    normal = result.normal[hit]
+    which = result.collider[hit]
+    depth = np.zeros(hit.size)
+    for index in np.unique(which):  # penetration z of the segment end, per collider hit
+        sel = which == index
+        entry = colliders[int(index)]
+        depth[sel] = entry.collider.query(end[hit[sel]], entry.transform)[0]
+    _hit(cfg, state, rng, beam[hit], point, normal, depth)
+    _send_events(world, entity, colliders, which, point, normal, incoming[hit], cfg.particle_mass)
+
+
+def step_emitter(world: World, entity: int, transform: Transform, cfg: EnergyWaveEmitter, state: EnergyWaveState,
+                 dt: float) -> None:
+    """Advance one emitter by one fixed step (see the module docstring for the order)."""
+    buf = state.particles
+    if buf.capacity != cfg.max_particles:
+        buf.grow(cfg.max_particles)
+    rng = world.random.stream("energy_wave", entity)
+    state.time += dt
+    n = buf.count
+    buf.age[:n] += dt
+    _steer_irregular(cfg, state, transform, dt)
+    beam = np.flatnonzero(buf.pattern[:n] == BEAM)
+    start = buf.position[beam]  # a copy (fancy indexing)
+    buf.position[:n] += buf.velocity[:n] * dt
+    if beam.size:
+        _collide_beam(world, entity, cfg, state, rng, beam, start)
+    _remove_dead(buf, buf.age[: buf.count] > buf.lifetime[: buf.count] + 1e-9)
+    emit(cfg, state, transform, rng, dt)
+
+
+def simulate_system(world: World, dt: float) -> None:
+    """Simulation stage: step every emitter, ascending entity id."""
+    for entity, (transform, cfg, state) in world.query(Transform, EnergyWaveEmitter, EnergyWaveState):
+        step_emitter(world, entity, transform, cfg, state, dt)
+
+
+# ------------------------------------------------------------------------------------------------------- queries
+def pattern_counts(state: EnergyWaveState) -> dict[str, int]:
+    """Live particles per pattern (and 'beam' for those still flying)."""
+    live = state.particles.live("pattern")
+    counts = np.bincount(live[live >= 0], minlength=len(PATTERNS))
+    return {"beam": int(np.sum(live == BEAM)), **{p: int(c) for p, c in zip(PATTERNS, counts)}}
+
+
+def alpha(state: EnergyWaveState) -> F64:
+    """Opacity of each live particle: 1 in the beam, remaining life fraction after the hit (section 3.4)."""
+    buf = state.particles
+    n = buf.count
+    life = np.clip(1.0 - buf.age[:n] / buf.lifetime[:n], 0.0, 1.0)
+    return np.where(buf.pattern[:n] == BEAM, 1.0, life)

@@ -1,0 +1,109 @@
+"""One frame of a field for one camera, decided on the CPU (no GL): culling, levels, level-4 orientations,
+the level-5 band and the primitive counts of table 4.  The renderer only uploads and draws this plan.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from components.grass_field import GrassFieldConfig
+from systems.grass_field.culling import cull_cells
+from systems.grass_field.lod import (N_BAND_SIDES, CameraInput, ImpostorOrientation, band_distance,
+                                     nearest_views, select_levels, visible_band_sides, wrap_angle)
+from systems.grass_field.simulate import FieldData
+
+__all__ = ["FramePlan", "plan_frame", "band_sector_content"]
+
+
+@dataclass
+class FramePlan:
+    """What to draw this frame."""
+
+    levels: np.ndarray  # (C,) level per cell, CULLED (-1) when culled
+    cells: list[np.ndarray]  # cells at geometric levels 0..3
+    impostor_cells: np.ndarray  # (n4,) cells at level 4
+    impostor_face: np.ndarray  # (n4,) azimuth each rectangle faces
+    impostor_views: np.ndarray  # (n4, 2) cached view indices (second used when blending)
+    impostor_blend: np.ndarray  # (n4,) weight of the second view (0 with the paper's swap rule)
+    viewer_cell: int
+    band_cell: int | None  # the cell whose band images are shown (None: no band this frame)
+    band_sides: np.ndarray = field(default_factory=lambda: np.zeros(N_BAND_SIDES, dtype=bool))
+    primitives: dict[int, int] = field(default_factory=dict)  # per level, real primitives
+
+    @property
+    def total_primitives(self) -> int:
+        return int(sum(self.primitives.values()))
+
+    def level_counts(self) -> np.ndarray:
+        """Cells per level: index 0 = culled, 1..6 = levels 0..5."""
+        return np.bincount(self.levels + 1, minlength=7)
+
+
+def band_sector_content(data: FieldData, centre_cell: int, apothem: float) -> np.ndarray:
+    """(12,) bool: which band sides have far cells behind them (empty sides are not drawn)."""
+    centres = data.placed.cell_centre[:, [0, 2]]
+    origin = centres[centre_cell]
+    far = band_distance(centres, origin) >= apothem
+    if not far.any():
+        return np.zeros(N_BAND_SIDES, dtype=bool)
+    rel = centres[far] - origin
+    dist = np.linalg.norm(rel, axis=1)
+    az = np.arctan2(rel[:, 1], rel[:, 0])
+    margin = np.pi / N_BAND_SIDES + np.arcsin(np.clip(data.cell_radius / dist, 0.0, 1.0))
+    sides = np.arange(N_BAND_SIDES) * (2.0 * np.pi / N_BAND_SIDES)
+    return (np.abs(wrap_angle(az[None, :] - sides[:, None])) <= margin[None, :]).any(axis=1)
+
+
+def plan_frame(cfg: GrassFieldConfig, data: FieldData, camera: CameraInput, orientation: ImpostorOrientation,
+               *, max_level: int | None = None, band_content=None) -> FramePlan:
+    """Cull cells, pick their levels (eq. 1, table 2, level 5 past the band) and update level-4 rectangles.
+
+    ``band_content(cell) -> (12,) bool`` may supply cached per-side content flags (see
+    :func:`band_sector_content`); ``max_level`` overrides ``cfg.max_level`` (commands change it at run time).
+    Orthographic views (a top-view minimap) use geometry only: the 12 cached views are side views.
+    """
+    placed = data.placed
+    max_level = cfg.max_level if max_level is None else int(max_level)
+    if camera.ortho_pixels_per_unit is not None:
+        max_level = 3  # cached side views and the band are meaningless seen from above (a minimap)
+    viewer = int(placed.cell_of(camera.position[[0, 2]]))
+    keep = cull_cells(placed.cell_centre, camera, cell_radius=data.cell_radius,
+                      near_distance=cfg.near_cull_cells * cfg.cell_size, viewer_cell=viewer)
+    levels = select_levels(data.lod_points, camera, length=cfg.length_of_interest,
+                           thresholds=cfg.level_thresholds, max_level=max_level,
+                           merge_distance=cfg.merge_distance, viewer_cell_centre=placed.cell_centre[viewer],
+                           keep=keep)
+    cells = [np.flatnonzero(levels == k) for k in range(4)]
+    prims = {k: int(data.cell_primitives[cells[k], k].sum()) for k in range(4)}
+
+    active = levels == 4
+    rel = placed.cell_centre[:, [0, 2]] - camera.position[[0, 2]]
+    to_eye = np.arctan2(-rel[:, 1], -rel[:, 0])
+    if camera.ortho_pixels_per_unit is not None:
+        to_eye = np.full(len(rel), np.arctan2(-camera.forward[2], -camera.forward[0]))
+    orientation.update(to_eye, active, np.radians(cfg.face_turn_deg), np.radians(cfg.image_switch_deg))
+    impostors = np.flatnonzero(active)
+    if cfg.blend_views:
+        a, b, w = nearest_views(to_eye[impostors])
+        turn = data.cell_turn[impostors]
+        views = np.stack([np.mod(a - 3 * turn, 12), np.mod(b - 3 * turn, 12)], axis=1)
+        blend = w
+    else:
+        view = orientation.local_view(data.cell_turn)[impostors]
+        views = np.stack([view, view], axis=1)
+        blend = np.zeros(len(impostors))
+    prims[4] = 2 * len(impostors)
+
+    band_cell = None
+    sides = np.zeros(N_BAND_SIDES, dtype=bool)
+    if max_level >= 5 and np.any(levels == 5):
+        band_cell = viewer
+        content = band_content(viewer) if band_content is not None else band_sector_content(
+            data, viewer, cfg.merge_distance)
+        sides = visible_band_sides(camera, placed.cell_centre[viewer, [0, 2]], cfg.merge_distance) & content
+    prims[5] = 2 * int(sides.sum())
+    return FramePlan(levels, cells, impostors, orientation.face[impostors].copy(), views.astype(np.int64),
+                     blend, viewer, band_cell, sides, prims)
+

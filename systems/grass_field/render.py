@@ -1,0 +1,525 @@
+"""GrassField rendering: instanced levels 0-3, the level-4 LOD cache (cached cell images) and the level-5 band.
+
+Per field and view, one opaque pass draws the :class:`~systems.grass_field.frame.FramePlan` decided on the CPU:
+
+* levels 0-3: one instanced draw per level and primitive type (triangles; lines at level 2; points at level 3).
+  The plant, mesh and cell-list data live in textures; instance ``i`` is plant ``i % n`` of the ``i / n``-th
+  listed cell (see ``shaders/plant.vert``);
+* level 4: one instanced draw of all level-4 rectangles; their images come from the LOD cache: each cell
+  layout's level-3 grass rendered at 12 views into an RGBA atlas (offscreen framebuffer, transparent
+  background) once, before the first frame that needs it, then reused; with ``disk_cache`` the atlas is
+  stored on disk keyed by :func:`~systems.grass_field.impostor.cache_key` so a restart skips baking;
+* level 5: one draw of the visible band sides; each viewer cell's 12 band images are baked (from the level-4
+  images of the far cells) when the viewer first needs them and kept in an LRU cache, and the neighbours of
+  the viewer's cell are baked ahead, one per frame.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import OrderedDict
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import moderngl
+import numpy as np
+
+from components.grass_field import GrassFieldConfig, GrassFieldState
+from engine.render.feature import OPAQUE, RenderFeature, View
+from engine.render.passes import lighting_uniforms, opaque_setup, set_uniforms
+from engine.spatial import Transform
+from systems.grass_field.frame import FramePlan, band_sector_content, plan_frame
+from systems.grass_field.impostor import (ATLAS_MIP_LEVELS, AtlasLayout, DiskCache, Progress, atlas_layout,
+                                          band_side_frame, band_view_proj, bake_view_proj, cache_key,
+                                          coverage_mipmaps, impostor_basis, tile_bounds, tile_frame, tile_pixels)
+from systems.grass_field.lod import (N_BAND_SIDES, N_VIEWS, CameraInput, ImpostorOrientation, band_distance,
+                                     camera_from_view)
+from systems.grass_field.simulate import FieldData, ensure_placed
+
+__all__ = ["GrassFieldFeature", "FieldGpu", "FieldFrame"]
+
+log = logging.getLogger("grass_field")
+SHADERS = Path(__file__).parent / "shaders"
+TEXTURE_WIDTH = 4096
+IMPOSTOR_FLOATS = 8
+MESH_KINDS = (("triangles", moderngl.TRIANGLES, 3), ("lines", moderngl.LINES, 2), ("points", moderngl.POINTS, 1))
+
+
+def _data_texture(ctx: moderngl.Context, texels: np.ndarray, dtype: str = "f4") -> moderngl.Texture:
+    """A 2-D texture holding ``texels`` (n, c) row by row, ``TEXTURE_WIDTH`` texels per row; nearest filtering."""
+    texels = np.asarray(texels)
+    n, comps = max(1, len(texels)), texels.shape[1]
+    w = min(TEXTURE_WIDTH, n)
+    h = -(-n // w)
+    data = np.zeros((w * h, comps), dtype=np.float32 if dtype == "f4" else np.int32)
+    data[:len(texels)] = texels
+    tex = ctx.texture((w, h), comps, data.tobytes(), dtype=dtype)
+    tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+    return tex
+
+
+def plant_texels(position: np.ndarray, yaw: np.ndarray, scale: np.ndarray, variant: np.ndarray,
+                 tint: np.ndarray) -> np.ndarray:
+    """(2N, 4) float32: per plant (x, y, z, yaw), (scale, variant, tint, 0) — see ``shaders/plant.vert``."""
+    out = np.zeros((len(position), 2, 4), dtype=np.float32)
+    out[:, 0, :3], out[:, 0, 3] = position, yaw
+    out[:, 1, 0], out[:, 1, 1], out[:, 1, 2] = scale, variant, tint
+    return out.reshape(-1, 4)
+
+
+@dataclass
+class FieldFrame:
+    """One field as extracted for this frame."""
+
+    entity: int
+    cfg: GrassFieldConfig
+    state: GrassFieldState  # read only (its random draws key the disk cache)
+    data: FieldData
+    max_level: int
+    debug: bool
+
+
+@dataclass
+class _BandEntry:
+    slot: int
+    eye: np.ndarray  # (3,) where the 12 images were captured from (cell centre at the viewer's height)
+    bottom: float
+    top: float
+    content: np.ndarray  # (12,) sides with far cells behind them
+
+
+class FieldGpu:
+    """The GL resources of one GrassField and its drawing (created lazily by the feature)."""
+
+    def __init__(self, renderer: Any, cfg: GrassFieldConfig, state: GrassFieldState, data: FieldData) -> None:
+        self.renderer = renderer
+        self.ctx: moderngl.Context = renderer.ctx
+        self.cfg, self.state, self.data = cfg, state, data
+        self.plant_prog = renderer.load_program(SHADERS, "plant")
+        self.impostor_prog = renderer.load_program(SHADERS, "impostor")
+        self.band_prog = renderer.load_program(SHADERS, "band")
+        placed = data.placed
+        ctx = self.ctx
+        self.plant_tex = _data_texture(ctx, plant_texels(placed.plant_position, placed.plant_yaw,
+                                                         placed.plant_scale, placed.plant_variant, placed.plant_tint))
+        self.cell_capacity = max(1, placed.cell_count)
+        self.cell_tex = _data_texture(ctx, np.zeros((self.cell_capacity, 1), np.int32), dtype="i4")
+        self._cell_upload = np.zeros(self.cell_tex.width * self.cell_tex.height, np.int32)
+        self.meshes: dict[tuple[int, str], tuple[moderngl.Texture, int, int]] = {}
+        for mesh in data.meshes:
+            for kind, mode, _ in MESH_KINDS:
+                arr = getattr(mesh, kind)
+                if arr.shape[1]:
+                    self.meshes[(mesh.level, kind)] = (_data_texture(ctx, arr.reshape(-1, 4)), arr.shape[1], mode)
+        self.plant_vao = ctx.vertex_array(self.plant_prog, [])
+        # level 4: the LOD cache
+        self.frame = tile_frame(cfg.cell_size, data.plant_reach, data.plant_height,
+                                np.radians(cfg.impostor_elevation_deg))
+        tw, th = tile_pixels(self.frame, cfg)
+        max_size = int(ctx.info.get("GL_MAX_TEXTURE_SIZE", 8192))
+        self.layout: AtlasLayout = atlas_layout(cfg.cell_variants * N_VIEWS, tw, th, min(max_size, 16384))
+        self.atlas: moderngl.Texture | None = None
+        self.bounds_tex: moderngl.Texture | None = None
+        self.baked_views = 0  # cached views rendered (each view of each layout once, unless loaded from disk)
+        self.loaded_from_disk = False
+        self.disk_path: Path | None = None
+        self.impostor_buf = ctx.buffer(reserve=self.cell_capacity * IMPOSTOR_FLOATS * 4)
+        self.impostor_vao = ctx.vertex_array(
+            self.impostor_prog, [(self.impostor_buf, "3f 1f 2f 1f 1f /i", "i_centre", "i_face", "i_tiles",
+                                  "i_blend", "i_level")])
+        # level 5: the band
+        self.band_entries: OrderedDict[tuple[int, int], _BandEntry] = OrderedDict()
+        self.band_layout: AtlasLayout | None = None
+        self.band_tex: moderngl.Texture | None = None
+        self.band_fbo: moderngl.Framebuffer | None = None
+        self.band_bakes = 0  # viewer cells whose 12 images were captured
+        self.band_buf = ctx.buffer(reserve=N_BAND_SIDES * 6 * 5 * 4)
+        self.band_vao = ctx.vertex_array(self.band_prog, [(self.band_buf, "3f 2f", "in_position", "in_uv")])
+        self._band_content: dict[int, np.ndarray] = {}
+        self.draw_calls = 0  # draw calls of the last draw() (bakes excluded)
+        self._released = False
+
+    # ----------------------------------------------------------------------------------- shared state
+    def band_content(self, cell: int) -> np.ndarray:
+        """Which band sides around ``cell`` have far cells behind them (cached per cell)."""
+        found = self._band_content.get(cell)
+        if found is None:
+            found = band_sector_content(self.data, cell, self.cfg.merge_distance)
+            self._band_content[cell] = found
+        return found
+
+    def _lighting(self, view: View | None) -> dict[str, Any]:
+        r = self.renderer
+        if view is not None:
+            return lighting_uniforms(r, view)
+        s = r.settings
+        return dict(sun_dir=tuple(r.sun_direction), sun_color=tuple(r.sun_color), ambient=r.ambient,
+                    sky_top=tuple(s.sky_top), sky_horizon=tuple(s.sky_horizon), fog_density=0.0)
+
+    def _plant_uniforms(self) -> dict[str, Any]:
+        cfg = self.cfg
+        return dict(mesh_tex=0, plant_tex=1, cell_tex=2, plants_per_cell=cfg.plants_per_cell,
+                    stem_color=tuple(cfg.stem_color), leaf_base_color=tuple(cfg.leaf_base_color),
+                    leaf_tip_color=tuple(cfg.leaf_tip_color))
+
+    def _draw_level(self, level: int, offset: int, cells: int) -> None:
+        if cells <= 0:
+            return
+        for kind, _, _ in MESH_KINDS:
+            entry = self.meshes.get((level, kind))
+            if entry is None:
+                continue
+            tex, verts, mode = entry
+            tex.use(0)
+            set_uniforms(self.plant_prog, mesh_verts=verts, cell_offset=offset)
+            self.plant_vao.render(mode, vertices=verts, instances=cells * self.cfg.plants_per_cell)
+            self.draw_calls += 1
+
+    # ------------------------------------------------------------------------------- level 4 (cache)
+    def _cache_extra(self) -> dict[str, Any]:
+        light = self._lighting(None)
+        return {"tile": [self.layout.tile_w, self.layout.tile_h, self.layout.cols, self.layout.rows],
+                "frame": [self.frame.half_width, self.frame.bottom, self.frame.top, self.frame.depth],
+                "sun_dir": [round(float(x), 6) for x in light["sun_dir"]],
+                "sun_color": [round(float(x), 6) for x in light["sun_color"]],
+                "ambient": round(float(light["ambient"]), 6),
+                "sky": [round(float(x), 6) for x in (*light["sky_top"], *light["sky_horizon"])]}
+
+    def ensure_impostors(self) -> None:
+        """Bake the 12 views of every cell layout into the atlas once (or load them from the disk cache)."""
+        if self.atlas is not None:
+            return
+        w, h = self.layout.size
+        key = cache_key(self.cfg, self.state, self._cache_extra())
+        disk = DiskCache(self.cfg.cache_dir) if self.cfg.disk_cache else None
+        image = disk.load(key, (h, w, 4)) if disk is not None else None
+        self.atlas = self.ctx.texture((w, h), 4)
+        if image is not None:
+            self.loaded_from_disk = True
+            self.disk_path = disk.path(key)
+            self.atlas.write(np.ascontiguousarray(image).tobytes())
+        else:
+            image = self._bake_atlas()
+            if disk is not None:
+                self.disk_path = disk.store(key, image)
+        self.bounds_tex = _data_texture(self.ctx, tile_bounds(image, self.layout))
+        self.atlas.build_mipmaps(0, ATLAS_MIP_LEVELS)
+        for level, mip in enumerate(coverage_mipmaps(image, ATLAS_MIP_LEVELS), start=1):
+            self.atlas.write(np.ascontiguousarray(mip).tobytes(), level=level)
+        self.atlas.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+        self.atlas.repeat_x = self.atlas.repeat_y = False
+
+    def _bake_atlas(self) -> np.ndarray:
+        """Render level-3 grass of each layout at 12 views (every 30°) with a transparent background."""
+        ctx, cfg, state = self.ctx, self.cfg, self.state
+        w, h = self.layout.size
+        depth = ctx.depth_renderbuffer((w, h))
+        fbo = ctx.framebuffer(color_attachments=[self.atlas], depth_attachment=depth)
+        layouts = cfg.cell_variants
+        n = cfg.plants_per_cell
+        offsets = state.layout_offset.reshape(-1, 2)
+        local = np.column_stack([offsets[:, 0], np.zeros(len(offsets)), offsets[:, 1]])
+        plants = _data_texture(ctx, plant_texels(local, state.layout_yaw.reshape(-1), state.layout_scale.reshape(-1),
+                                                 state.layout_variant.reshape(-1), state.layout_tint.reshape(-1)))
+        cells = _data_texture(ctx, np.arange(layouts, dtype=np.int32)[:, None], dtype="i4")
+        try:
+            fbo.use()
+            fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+            ctx.enable(moderngl.DEPTH_TEST)
+            ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
+            prog = self.plant_prog
+            set_uniforms(prog, **self._lighting(None), **self._plant_uniforms(), debug_level=-1)
+            plants.use(1)
+            cells.use(2)
+            progress = Progress("grass_field: baking the LOD cache", layouts * N_VIEWS)
+            for k in range(layouts):
+                for v in range(N_VIEWS):
+                    vp = self.layout.viewport(k * N_VIEWS + v)
+                    fbo.viewport = vp
+                    fbo.scissor = vp
+                    _, _, normal = impostor_basis(v * 2.0 * np.pi / N_VIEWS, self.frame.elevation)
+                    set_uniforms(prog, view_proj=bake_view_proj(v, self.frame).T.astype(np.float32).copy(),
+                                 camera_pos=tuple(normal * (2.0 * self.frame.depth + 1.0)))
+                    self._draw_level(3, k, 1)
+                    self.baked_views += 1
+                progress.update((k + 1) * N_VIEWS)
+            fbo.scissor = None
+            raw = self.atlas.read()
+        finally:
+            fbo.release()
+            depth.release()
+            plants.release()
+            cells.release()
+        return np.frombuffer(raw, np.uint8).reshape(h, w, 4).copy()
+
+    def _impostor_uniforms(self, view_proj: np.ndarray, eye: np.ndarray, ortho: bool) -> dict[str, Any]:
+        f, lay = self.frame, self.layout
+        return dict(view_proj=view_proj.T.astype(np.float32).copy(), eye=tuple(float(x) for x in eye),
+                    ortho=int(ortho), frame=(f.half_width, f.bottom, f.top, f.depth), elevation=f.elevation,
+                    atlas=(float(lay.cols), float(lay.tile_w), float(lay.tile_h), float(lay.pad)),
+                    atlas_size=tuple(float(x) for x in lay.size), atlas_tex=0, bounds_tex=1)
+
+    def _impostor_instances(self, cells: np.ndarray, face: np.ndarray, views: np.ndarray, blend: np.ndarray,
+                            level: int) -> int:
+        data = np.zeros((len(cells), IMPOSTOR_FLOATS), np.float32)
+        if len(cells):
+            data[:, 0:3] = self.data.placed.cell_centre[cells]
+            data[:, 3] = face
+            data[:, 4:6] = self.data.cell_variant[cells, None] * N_VIEWS + views
+            data[:, 6] = blend
+            data[:, 7] = level
+            self.impostor_buf.write(data.tobytes())
+        return len(cells)
+
+    # ------------------------------------------------------------------------------------ level 5 (band)
+    def _band_key(self, cell: int, eye_y: float) -> tuple[int, int]:
+        ground = float(self.data.placed.cell_centre[cell, 1])
+        step = max(0.5 * self.data.plant_height, 1e-6)
+        return cell, int(np.floor((eye_y - ground) / step + 0.5))
+
+    def ensure_band(self, cell: int, camera: CameraInput, prefetch: int = 1) -> _BandEntry:
+        """The band images of ``cell`` (baked now if missing), and up to ``prefetch`` neighbours baked ahead."""
+        key = self._band_key(cell, float(camera.position[1]))
+        entry = self.band_entries.get(key)
+        if entry is None:
+            entry = self._bake_band(key, camera)
+        self.band_entries.move_to_end(key)
+        placed = self.data.placed
+        col, row = cell % placed.grid_x, cell // placed.grid_x
+        around = [(r * placed.grid_x + c, key[1]) for r in range(row - 1, row + 2) for c in range(col - 1, col + 2)
+                  if 0 <= r < placed.grid_z and 0 <= c < placed.grid_x]
+        for neighbour in around:
+            if prefetch <= 0:
+                break
+            if neighbour in self.band_entries:
+                continue
+            full = len(self.band_entries) >= self.cfg.band_cache_cells
+            if full and next(iter(self.band_entries)) in around:
+                break  # never evict the neighbourhood to bake ahead
+            self._bake_band(neighbour, camera)
+            self.band_entries.move_to_end(key)
+            prefetch -= 1
+        return entry
+
+    def _band_atlas(self, camera: CameraInput, height_ratio: float) -> None:
+        if self.band_tex is not None:
+            return
+        cfg = self.cfg
+        half = cfg.merge_distance * np.tan(np.pi / N_BAND_SIDES)
+        if camera.ortho_pixels_per_unit is not None:
+            per_unit = 256.0 / (2.0 * half)
+        else:
+            per_unit = camera.width / (2.0 * cfg.merge_distance * camera.tan_half_fov)
+        tw = int(np.clip(np.ceil(2.0 * half * per_unit * cfg.band_resolution_scale), 16, 2048))
+        th = int(np.clip(np.ceil(tw * height_ratio * 1.25), 8, 512))
+        max_size = min(int(self.ctx.info.get("GL_MAX_TEXTURE_SIZE", 8192)), 16384)
+        self.band_layout = atlas_layout(cfg.band_cache_cells * N_BAND_SIDES, tw, th, max_size, pad=1)
+        self.band_tex = self.ctx.texture(self.band_layout.size, 4)
+        self.band_tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        self.band_tex.repeat_x = self.band_tex.repeat_y = False
+        self.band_depth = self.ctx.depth_renderbuffer(self.band_layout.size)
+        self.band_fbo = self.ctx.framebuffer(color_attachments=[self.band_tex], depth_attachment=self.band_depth)
+        self.band_fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+
+    def _bake_band(self, key: tuple[int, int], camera: CameraInput) -> _BandEntry:
+        """Capture the far surroundings of cell ``key[0]`` in 12 directions from its centre (section 6)."""
+        cfg, placed = self.cfg, self.data.placed
+        cell = key[0]
+        centre = placed.cell_centre[cell]
+        step = max(0.5 * self.data.plant_height, 1e-6)
+        eye = np.array([centre[0], centre[1] + key[1] * step, centre[2]])
+        apothem = cfg.merge_distance
+        far = np.flatnonzero(band_distance(placed.cell_centre[:, [0, 2]], centre[[0, 2]]) >= apothem)
+        content = self.band_content(cell)
+        bottom, top = eye[1] - 1.0, eye[1] + 1.0
+        if len(far):
+            depth = band_distance(placed.cell_centre[far][:, [0, 2]], eye[[0, 2]]) - self.data.cell_radius
+            scale = apothem / np.maximum(depth, 0.5 * apothem)
+            lo = placed.cell_ground[far, 0] - 0.05 * self.data.plant_height
+            hi = placed.cell_ground[far, 1] + self.data.plant_height
+            bottom = float(min((eye[1] + (lo - eye[1]) * scale).min(), eye[1] - 1e-3))
+            top = float(max((eye[1] + (hi - eye[1]) * scale).max(), eye[1] + 1e-3))
+        half = apothem * np.tan(np.pi / N_BAND_SIDES)
+        self._band_atlas(camera, (top - bottom) / (2.0 * half))
+        if key in self.band_entries:
+            slot = self.band_entries.pop(key).slot
+        elif len(self.band_entries) >= cfg.band_cache_cells:
+            slot = self.band_entries.popitem(last=False)[1].slot  # the least recently used
+        else:
+            slot = len(self.band_entries)
+        entry = _BandEntry(slot, eye, bottom, top, content)
+        self.band_entries[key] = entry
+        self._render_band(entry, far)
+        self.band_bakes += 1
+        return entry
+
+    def _render_band(self, entry: _BandEntry, far: np.ndarray) -> None:
+        placed = self.data.placed
+        rel = placed.cell_centre[far][:, [0, 2]] - entry.eye[[0, 2]]
+        face = np.arctan2(-rel[:, 1], -rel[:, 0])
+        step = 2.0 * np.pi / N_VIEWS
+        view = np.mod(np.round(np.mod(face, 2.0 * np.pi) / step).astype(np.int64) - 3 * self.data.cell_turn[far],
+                      N_VIEWS)
+        count = self._impostor_instances(far, face, np.stack([view, view], axis=1), np.zeros(len(far)), 5)
+        fbo, lay = self.band_fbo, self.band_layout
+        reach = np.linalg.norm(placed.cell_centre[:, [0, 2]] - entry.eye[[0, 2]], axis=1).max()
+        fbo.use()
+        self.ctx.enable(moderngl.DEPTH_TEST)
+        self.ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
+        prog = self.impostor_prog
+        set_uniforms(prog, **self._lighting(None), debug=0)
+        self.atlas.use(0)
+        self.bounds_tex.use(1)
+        for side in range(N_BAND_SIDES):
+            vp = lay.viewport(entry.slot * N_BAND_SIDES + side)
+            fbo.viewport = vp
+            fbo.scissor = vp
+            fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0, viewport=vp)
+            if not entry.content[side] or count == 0:
+                continue
+            vp_mat = band_view_proj(entry.eye, self.cfg.merge_distance, side, entry.bottom, entry.top,
+                                    reach + 2.0 * self.data.cell_radius)
+            set_uniforms(prog, **self._impostor_uniforms(vp_mat, entry.eye, False), camera_pos=tuple(entry.eye))
+            self.impostor_vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=count)
+        fbo.scissor = None
+
+    def _band_quads(self, entry: _BandEntry, sides: np.ndarray) -> int:
+        lay = self.band_layout
+        w, h = lay.size
+        quads = []
+        for side in np.flatnonzero(sides):
+            normal, right, half = band_side_frame(entry.eye, self.cfg.merge_distance, int(side))
+            mid = entry.eye + normal * self.cfg.merge_distance
+            x, y, tw, th = lay.viewport(entry.slot * N_BAND_SIDES + int(side))
+            corners = []
+            for cx, cy in ((0, 0), (1, 0), (0, 1), (1, 0), (1, 1), (0, 1)):
+                p = mid + (2 * cx - 1) * half * right
+                p = np.array([p[0], entry.bottom if cy == 0 else entry.top, p[2]])
+                corners.append([*p, (x + cx * tw) / w, (y + cy * th) / h])
+            quads.extend(corners)
+        if quads:
+            self.band_buf.write(np.asarray(quads, np.float32).tobytes())
+        return len(quads)
+
+    # ---------------------------------------------------------------------------------------- drawing
+    def prepare(self, plan: FramePlan, camera: CameraInput) -> None:
+        """Bake what this frame needs and is not cached yet (the LOD cache; the viewer cell's band)."""
+        if len(plan.impostor_cells) or plan.band_cell is not None:
+            self.ensure_impostors()
+        if plan.band_cell is not None:
+            self.ensure_band(plan.band_cell, camera)
+
+    def draw(self, fbo: moderngl.Framebuffer, plan: FramePlan, view: View, camera: CameraInput,
+             debug: bool) -> None:
+        """Draw the plan into ``fbo`` (the view's colour + depth): a handful of instanced draw calls."""
+        ctx = self.ctx
+        self.draw_calls = 0
+        fbo.use()
+        ctx.enable(moderngl.DEPTH_TEST)
+        ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
+        lighting = self._lighting(view)
+        # levels 0-3: one cell list, one draw per level and primitive type
+        counts = [len(c) for c in plan.cells]
+        cells = np.concatenate(plan.cells) if sum(counts) else np.zeros(0, np.int32)
+        if len(cells):
+            self._cell_upload[:len(cells)] = cells
+            self.cell_tex.write(self._cell_upload.tobytes())
+            prog = self.plant_prog
+            set_uniforms(prog, **{**lighting, **self._plant_uniforms()})
+            self.plant_tex.use(1)
+            self.cell_tex.use(2)
+            offset = 0
+            for level, count in enumerate(counts):
+                set_uniforms(prog, debug_level=level if debug else -1)
+                self._draw_level(level, offset, count)
+                offset += count
+        # level 4, front to back (early depth rejection behind nearer rectangles)
+        near_first = np.argsort(np.linalg.norm(self.data.placed.cell_centre[plan.impostor_cells] - camera.position,
+                                               axis=1), kind="stable")
+        count = self._impostor_instances(plan.impostor_cells[near_first], plan.impostor_face[near_first],
+                                         plan.impostor_views[near_first], plan.impostor_blend[near_first], 4)
+        if count:
+            prog = self.impostor_prog
+            set_uniforms(prog, **{**lighting, **self._impostor_uniforms(view.view_proj, view.camera_pos, view.ortho),
+                                  "debug": int(debug)})
+            self.atlas.use(0)
+            self.bounds_tex.use(1)
+            self.impostor_vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=count)
+            self.draw_calls += 1
+        # level 5
+        if plan.band_cell is not None and plan.band_sides.any():
+            entry = self.band_entries[self._band_key(plan.band_cell, float(camera.position[1]))]
+            vertices = self._band_quads(entry, plan.band_sides & entry.content)
+            if vertices:
+                set_uniforms(self.band_prog, **{**lighting, "band_tex": 0, "debug": int(debug)})
+                self.band_tex.use(0)
+                self.band_vao.render(moderngl.TRIANGLES, vertices=vertices)
+                self.draw_calls += 1
+
+    def release(self) -> None:
+        if self._released:
+            return
+        self._released = True
+        objects = [self.plant_tex, self.cell_tex, self.plant_vao, self.impostor_buf, self.impostor_vao, self.bounds_tex,
+                   self.band_buf, self.band_vao, self.atlas, self.band_tex, self.band_fbo,
+                   getattr(self, "band_depth", None)]
+        objects += [entry[0] for entry in self.meshes.values()]
+        for obj in objects:
+            if obj is not None:
+                obj.release()
+
+
+class GrassFieldFeature(RenderFeature):
+    """Render feature of every GrassField: plans each view on the CPU, then one opaque pass draws it."""
+
+    name = "grass_field"
+    phase = OPAQUE
+
+    def __init__(self, renderer: Any) -> None:
+        super().__init__(renderer)
+        self.fields: dict[int, FieldGpu] = {}
+        self.orientations: dict[tuple[int, str], ImpostorOrientation] = {}
+        self.plans: dict[tuple[int, str], FramePlan] = {}  # the last plan per (entity, view), for statistics
+
+    def extract(self, world) -> list[FieldFrame]:
+        out = []
+        for entity, (transform, cfg, state) in world.query(Transform, GrassFieldConfig, GrassFieldState):
+            data = ensure_placed(world, transform, cfg, state)
+            out.append(FieldFrame(entity, cfg, state, data, state.max_level, state.debug_levels))
+        return out
+
+    def gpu(self, frame: FieldFrame) -> FieldGpu:
+        gpu = self.fields.get(frame.entity)
+        if gpu is None or gpu.data is not frame.data or gpu.cfg is not frame.cfg:
+            if gpu is not None:
+                gpu.release()
+            gpu = FieldGpu(self.renderer, frame.cfg, frame.state, frame.data)
+            self.fields[frame.entity] = gpu
+            for key in [k for k in self.orientations if k[0] == frame.entity]:
+                del self.orientations[key]
+        return gpu
+
+    def add_passes(self, graph, view: View, data: list[FieldFrame]) -> None:
+        for frame in data or ():
+            gpu = self.gpu(frame)
+            camera = camera_from_view(view)
+            orientation = self.orientations.get((frame.entity, view.name))
+            if orientation is None:
+                orientation = ImpostorOrientation(frame.data.cell_count)
+                self.orientations[(frame.entity, view.name)] = orientation
+            plan = plan_frame(frame.cfg, frame.data, camera, orientation, max_level=frame.max_level,
+                              band_content=gpu.band_content)
+            self.plans[(frame.entity, view.name)] = plan
+
+            def execute(pc, gpu=gpu, plan=plan, camera=camera, debug=frame.debug):
+                gpu.prepare(plan, camera)
+                fbo = self.renderer.framebuffer(pc.get(view.color), pc.get(view.depth))
+                gpu.draw(fbo, plan, view, camera, debug)
+
+            graph.add_pass(f"grass_field.{frame.entity}.{view.name}", opaque_setup(view), execute)
+
+    def release(self) -> None:
+        for gpu in self.fields.values():
+            gpu.release()
+        self.fields.clear()

@@ -1,0 +1,54 @@
+#version 330
+#include "common.glsl"
+// Level 4: one textured rectangle per cell, instanced. The rectangle faces azimuth i_face (turned by the 15°
+// rule on the CPU) and shows cached view i_tiles.x (i_tiles.y is cross-faded in with weight i_blend when the
+// blending option is on). It is drawn scaled about the eye so it sits in front of the cell's content while
+// covering exactly the same pixels.
+uniform mat4 view_proj;
+uniform vec3 eye;
+uniform int ortho;
+uniform vec4 frame;        // half width, bottom, top, depth of the cached region
+uniform float elevation;   // of the cached views
+uniform vec4 atlas;        // columns, tile width, tile height, padding (texels)
+uniform vec2 atlas_size;
+uniform sampler2D bounds_tex;  // per tile: the part holding grass (u0, v0, u1, v1); the rectangle is trimmed to it
+in vec3 i_centre;
+in float i_face;
+in vec2 i_tiles;
+in float i_blend;
+in float i_level;
+out vec2 v_uv_a;
+out vec2 v_uv_b;
+out float v_blend;
+out vec3 v_fog_pos;
+flat out int v_level;
+vec2 tile_uv(float tile, vec2 local) {
+    int t = int(tile + 0.5);
+    int cols = int(atlas.x + 0.5);
+    vec2 slot = vec2(float(t % cols), float(t / cols));
+    vec2 origin = slot * (atlas.yz + 2.0 * atlas.w) + atlas.w;
+    return (origin + local * atlas.yz) / atlas_size;
+}
+void main() {
+    vec4 bounds = fetch(bounds_tex, int(i_tiles.x + 0.5));
+    if (i_blend > 0.0) {
+        vec4 other = fetch(bounds_tex, int(i_tiles.y + 0.5));
+        bounds = vec4(min(bounds.xy, other.xy), max(bounds.zw, other.zw));
+    }
+    vec2 corner = mix(bounds.xy, bounds.zw, vec2(float(gl_VertexID & 1), float(gl_VertexID >> 1)));
+    vec3 right, up, normal;
+    impostor_basis(i_face, elevation, right, up, normal);
+    vec3 world = i_centre + ((corner.x * 2.0 - 1.0) * frame.x) * right + mix(frame.y, frame.z, corner.y) * up;
+    v_fog_pos = world;
+    if (ortho == 0) {
+        float d = length(i_centre - eye);
+        world = eye + (world - eye) * max(0.05, (d - frame.w) / max(d, 1e-4));
+    } else {
+        world += normal * frame.w;
+    }
+    v_uv_a = tile_uv(i_tiles.x, corner);
+    v_uv_b = tile_uv(i_tiles.y, corner);
+    v_blend = i_blend;
+    v_level = int(i_level + 0.5);
+    gl_Position = view_proj * vec4(world, 1.0);
+}

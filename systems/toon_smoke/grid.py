@@ -1,0 +1,172 @@
+"""Grid geometry and interpolation shared by the fluid, the particles and the display grid (pure numpy).
+
+Index conventions (all arrays [x, y, z]):
+* a cell-centred field of n cells has its sample i at i + ½ cell units from the box's low corner;
+* the MAC velocity u lives on x-faces (nx+1, ny, nz) at (i, j+½, k+½), v on y-faces, w on z-faces;
+* "cell units" measure positions from the box's low corner in simulation cells; local metres are
+  ``cell units · h − extent/2``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+F32 = NDArray[np.float32]
+
+
+@dataclass
+class Trilinear:
+    """Indices and weights of trilinear interpolation at many points of one grid shape (reused per field)."""
+
+    base: NDArray[np.intp]
+    fx: F32
+    fy: F32
+    fz: F32
+    stride_x: int
+    stride_y: int
+
+    def gather(self, values: F32) -> F32:
+        """Interpolate ``values`` (the grid shape given to :func:`trilinear_weights`) at the points."""
+        flat = values.ravel()
+        b, sx, sy = self.base, self.stride_x, self.stride_y
+        c00 = flat[b]
+        c00 = c00 + (flat[b + 1] - c00) * self.fz
+        c01 = flat[b + sy]
+        c01 = c01 + (flat[b + sy + 1] - c01) * self.fz
+        c10 = flat[b + sx]
+        c10 = c10 + (flat[b + sx + 1] - c10) * self.fz
+        c11 = flat[b + sx + sy]
+        c11 = c11 + (flat[b + sx + sy + 1] - c11) * self.fz
+        c0 = c00 + (c01 - c00) * self.fy
+        c1 = c10 + (c11 - c10) * self.fy
+        return c0 + (c1 - c0) * self.fx
+
+
+def trilinear_weights(shape: tuple[int, int, int], x: F32, y: F32, z: F32) -> Trilinear:
+    """Weights to sample a grid of ``shape`` at index-space coordinates (x, y, z), clamped to the grid.
+
+    Clamping the coordinates (not the result) makes a back-trace that leaves the box read the boundary value, as
+    in Stam's clamped semi-Lagrangian advection.
+    """
+    nx, ny, nz = shape
+    dtype = np.float32 if np.asarray(x).dtype == np.float32 else np.float64
+    coords = []
+    for c, n in ((x, nx), (y, ny), (z, nz)):
+        c = np.clip(c, 0.0, n - 1.0).astype(dtype, copy=False)
+        i = np.minimum(c.astype(np.intp), n - 2)
+        coords.append((i, c - i.astype(dtype)))
+    (i, fx), (j, fy), (k, fz) = coords
+    base = (i * ny + j) * nz + k
+    return Trilinear(base, fx, fy, fz, ny * nz, nz)
+
+
+def sample(values: F32, x: F32, y: F32, z: F32) -> F32:
+    """Trilinear interpolation of ``values`` at index-space coordinates (clamped)."""
+    return trilinear_weights(values.shape, x, y, z).gather(values)
+
+
+def sample_mac(u: F32, v: F32, w: F32, px: F32, py: F32, pz: F32) -> tuple[F32, F32, F32]:
+    """Velocity at points given in cell units: each component from its own staggered grid."""
+    return (sample(u, px, py - 0.5, pz - 0.5), sample(v, px - 0.5, py, pz - 0.5), sample(w, px - 0.5, py - 0.5, pz))
+
+
+def upsample_linear(values: F32, factor: int) -> F32:
+    """Trilinear upsampling of a cell-centred grid by an integer factor (separable, one axis at a time).
+
+    Fine cell i sits at (i + ½)/factor − ½ coarse cells; the coarse field is clamped at the borders.  Used to copy
+    the simulation grid onto the display grid each step (seeds/002 §3.2).
+    """
+    if factor == 1:
+        return values.copy()
+    out = values
+    for axis in range(3):
+        n = out.shape[axis]
+        i0, i1, t = _axis_weights(n, factor)
+        a = np.take(out, i0, axis=axis)
+        b = np.take(out, i1, axis=axis)
+        shape = [1, 1, 1]
+        shape[axis] = -1
+        out = a + (b - a) * t.reshape(shape)
+    return out
+
+
+_AXIS_CACHE: dict[tuple[int, int], tuple[NDArray[np.intp], NDArray[np.intp], F32]] = {}
+
+
+def _axis_weights(n: int, factor: int) -> tuple[NDArray[np.intp], NDArray[np.intp], F32]:
+    key = (n, factor)
+    if key not in _AXIS_CACHE:
+        pos = (np.arange(n * factor) + 0.5) / factor - 0.5
+        pos = np.clip(pos, 0.0, n - 1.0)
+        i0 = np.minimum(np.floor(pos).astype(np.intp), max(n - 2, 0))
+        i1 = np.minimum(i0 + 1, n - 1)
+        _AXIS_CACHE[key] = (i0, i1, (pos - i0).astype(np.float32))
+    return _AXIS_CACHE[key]
+
+
+@dataclass
+class Geometry:
+    """Coordinates and masks of one volume config, built once (derived from the config, not state)."""
+
+    shape: tuple[int, int, int]
+    display_shape: tuple[int, int, int]
+    factor: int
+    h: float  # simulation cell size, metres
+    extent: NDArray[np.float64]
+    centres: tuple[F32, F32, F32]  # cell-centre coordinates in cell units, broadcastable (n,1,1) / (1,n,1) / (1,1,n)
+    faces_1d: tuple[F32, F32, F32]  # face coordinates per axis (n+1) in cell units
+    centres_1d: tuple[F32, F32, F32]  # centre coordinates per axis (n) in cell units
+    backtrace_bases: dict[str, tuple[F32, F32, F32]] = field(default_factory=dict)
+
+    @classmethod
+    def build(cls, shape: tuple[int, int, int], factor: int, extent) -> Geometry:
+        extent = np.asarray(extent, float)
+        h = float(extent[0] / shape[0])
+        centres_1d = tuple((np.arange(n) + 0.5).astype(np.float32) for n in shape)
+        faces_1d = tuple(np.arange(n + 1).astype(np.float32) for n in shape)
+        centres = tuple(c.reshape([-1 if a == i else 1 for a in range(3)]) for i, c in enumerate(centres_1d))
+        g = cls(tuple(shape), tuple(n * factor for n in shape), int(factor), h, extent, centres, faces_1d,
+                centres_1d)
+        g.backtrace_bases = {name: g._full_grid(name) for name in ("u", "v", "w", "c")}
+        return g
+
+    def _full_grid(self, name: str) -> tuple[F32, F32, F32]:
+        """Dense coordinates (cell units) of every sample of the u / v / w faces or of the cell centres."""
+        axes = list(self.centres_1d)
+        if name != "c":
+            a = "uvw".index(name)
+            axes[a] = self.faces_1d[a]
+        grids = np.meshgrid(*axes, indexing="ij")
+        return tuple(np.ascontiguousarray(g, dtype=np.float32) for g in grids)
+
+    # -- conversions between local metres and cell units
+    def to_cells(self, local: NDArray[np.float64]) -> NDArray[np.float64]:
+        return (local + 0.5 * self.extent) / self.h
+
+    def to_local(self, cells: NDArray[np.float64]) -> NDArray[np.float64]:
+        return cells * self.h - 0.5 * self.extent
+
+    def local_centres(self) -> tuple[NDArray[np.float64], ...]:
+        """Cell-centre coordinates in local metres, broadcastable per axis."""
+        return tuple(c.astype(np.float64) * self.h - 0.5 * e for c, e in zip(self.centres, self.extent))
+
+    def local_display_centres(self) -> tuple[NDArray[np.float64], ...]:
+        """Display-cell-centre coordinates in local metres, broadcastable per axis."""
+        hd = self.h / self.factor
+        out = []
+        for axis, (n, e) in enumerate(zip(self.display_shape, self.extent)):
+            c = (np.arange(n) + 0.5) * hd - 0.5 * e
+            out.append(c.reshape([-1 if a == axis else 1 for a in range(3)]))
+        return tuple(out)
+
+    def local_faces(self, axis: int) -> tuple[NDArray[np.float64], ...]:
+        """Coordinates (local metres, broadcastable) of the faces normal to ``axis``."""
+        out = []
+        for a in range(3):
+            c = self.faces_1d[a] if a == axis else self.centres_1d[a]
+            c = c.astype(np.float64) * self.h - 0.5 * self.extent[a]
+            out.append(c.reshape([-1 if b == a else 1 for b in range(3)]))
+        return tuple(out)

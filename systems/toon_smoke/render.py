@@ -1,0 +1,239 @@
+"""Render passes of the toon_smoke plugin (seeds/002 §3.5 and its "future work" outlines).
+
+Per view, two passes go into the render graph:
+
+* ``toon_smoke.surface.<view>`` (opaque): draws each volume's isosurface mesh with the colour of a 1D toon-ramp
+  texture (nearest filtering: hard bands) at c = (−v·g + 1)/2, and its sphere obstacle in two cel bands.  It writes
+  the view's colour and depth and creates the transient ``toon_smoke.edges.<view>`` (object id, linear depth).
+* ``toon_smoke.outline.<view>``: reads the edge buffer and paints the silhouette and inner contour lines over the
+  view's colour.
+
+The meshes are uploaded only when the simulation re-meshed (``mesh_version``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import moderngl
+import numpy as np
+
+from components.toon_smoke import ToonSmokeState, ToonSmokeVolumeConfig
+from engine.render.feature import OPAQUE, RenderFeature, View
+from engine.render.graph import TextureDesc
+from engine.render.passes import primitive, set_uniforms
+from engine.spatial import Transform
+
+SHADERS = Path(__file__).parent / "shaders"
+RAMP_TEXELS = 256
+MAX_VOLUMES = 16
+
+
+def ramp_texels(colors, positions, texels: int = RAMP_TEXELS) -> np.ndarray:
+    """The 1D tone-mapping texture of figure 3: texel i (c = (i + ½)/texels) takes the colour of the last band
+    whose start position is ≤ c.  Returns (texels, 3) float32."""
+    c = (np.arange(texels) + 0.5) / texels
+    band = np.searchsorted(np.asarray(positions, float), c, side="right") - 1
+    return np.asarray(colors, np.float32)[np.clip(band, 0, len(colors) - 1)]
+
+
+@dataclass
+class VolumeDraw:
+    """What the passes need of one volume, copied in render-extract."""
+
+    entity: int
+    index: int
+    mesh_version: int
+    mesh: tuple[np.ndarray, np.ndarray] | None  # (interleaved vertices, indices) when it changed, else None
+    model: np.ndarray  # 4x4 float32, rigid (scale ignored like the simulation)
+    ramp: tuple
+    outline_width: float
+    outline_color: tuple
+    outline_threshold: float
+    obstacle: tuple | None  # (centre, radius, colour)
+
+
+@dataclass
+class _GpuMesh:
+    vbo: moderngl.Buffer
+    ibo: moderngl.Buffer
+    vao: moderngl.VertexArray
+    count: int
+    version: int
+
+    def release(self) -> None:
+        self.vao.release()
+        self.vbo.release()
+        self.ibo.release()
+
+
+def rigid_matrix(t: Transform) -> np.ndarray:
+    m = np.eye(4)
+    m[:3, :3] = t.rotation_matrix()
+    m[:3, 3] = t.position
+    return m
+
+
+class ToonSmokeFeature(RenderFeature):
+    name = "toon_smoke"
+    phase = OPAQUE
+
+    def __init__(self, renderer) -> None:
+        super().__init__(renderer)
+        self._meshes: dict[int, _GpuMesh] = {}
+        self._ramps: dict[tuple, moderngl.Texture] = {}
+        self._sphere: moderngl.VertexArray | None = None
+        self._sphere_buffers: tuple = ()
+        self._outline_vao: moderngl.VertexArray | None = None
+
+    # ------------------------------------------------------------------ extract
+    def extract(self, world) -> list[VolumeDraw]:
+        out = []
+        query = world.query(Transform, ToonSmokeVolumeConfig, ToonSmokeState)
+        for index, (entity, (t, cfg, state)) in enumerate(query[:MAX_VOLUMES]):
+            gpu = self._meshes.get(entity)
+            mesh = None
+            if (gpu is None or gpu.version != state.mesh_version) and state.mesh_vertices is not None:
+                verts = np.concatenate([state.mesh_vertices, state.mesh_normals], axis=1).astype(np.float32)
+                mesh = (verts, state.mesh_faces.astype(np.uint32).ravel())
+            obstacle = None
+            if cfg.obstacle_radius > 0.0:
+                obstacle = (tuple(cfg.obstacle_center), cfg.obstacle_radius, tuple(cfg.obstacle_color))
+            out.append(VolumeDraw(entity, index, state.mesh_version, mesh, rigid_matrix(t).astype(np.float32),
+                                  (tuple(map(tuple, cfg.ramp_colors)), tuple(cfg.ramp_positions)),
+                                  cfg.outline_width, tuple(cfg.outline_color), cfg.outline_depth_threshold,
+                                  obstacle))
+        return out
+
+    # ---------------------------------------------------------------- resources
+    def _program(self) -> moderngl.Program:
+        return self.renderer.load_program(SHADERS, "toon")
+
+    def _upload(self, draw: VolumeDraw) -> _GpuMesh | None:
+        gpu = self._meshes.get(draw.entity)
+        if draw.mesh is None:
+            return gpu
+        verts, indices = draw.mesh
+        vdata, idata = verts.tobytes() or b"\0" * 24, indices.tobytes() or b"\0" * 12
+        if gpu is None or gpu.vbo.size < len(vdata) or gpu.ibo.size < len(idata):
+            if gpu is not None:
+                gpu.release()
+            vbo = self.ctx.buffer(reserve=max(len(vdata) * 3 // 2, 1024))
+            ibo = self.ctx.buffer(reserve=max(len(idata) * 3 // 2, 1024))
+            vao = self.ctx.vertex_array(self._program(), [(vbo, "3f 3f", "in_position", "in_normal")], ibo)
+            gpu = _GpuMesh(vbo, ibo, vao, 0, -1)
+            self._meshes[draw.entity] = gpu
+        gpu.vbo.write(vdata)
+        gpu.ibo.write(idata)
+        gpu.count, gpu.version = len(indices), draw.mesh_version
+        return gpu
+
+    def _ramp(self, key: tuple) -> moderngl.Texture:
+        tex = self._ramps.get(key)
+        if tex is None:
+            texels = ramp_texels(*key)
+            tex = self.ctx.texture((RAMP_TEXELS, 1), 3, texels.tobytes(), dtype="f4")
+            tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            tex.repeat_x = tex.repeat_y = False
+            self._ramps[key] = tex
+        return tex
+
+    def _sphere_vao(self) -> moderngl.VertexArray:
+        if self._sphere is None:
+            verts, idx = primitive("sphere")
+            vbo, ibo = self.ctx.buffer(verts.tobytes()), self.ctx.buffer(idx.tobytes())
+            self._sphere = self.ctx.vertex_array(self._program(), [(vbo, "3f 3f", "in_position", "in_normal")], ibo)
+            self._sphere_buffers = (vbo, ibo)
+        return self._sphere
+
+    # ------------------------------------------------------------------- passes
+    def add_passes(self, graph, view: View, data: list[VolumeDraw]) -> None:
+        if not data:
+            return
+        handles = {}
+
+        def setup(b):
+            view.color = b.write(view.color)
+            view.depth = b.write(view.depth)
+            edges = b.create(f"toon_smoke.edges.{view.name}", TextureDesc(view.width, view.height, "rg32f"))
+            handles["edges"] = b.write(edges)
+
+        graph.add_pass(f"toon_smoke.surface.{view.name}", setup,
+                       lambda pc: self._draw_surfaces(pc, view, data, handles["edges"]))
+        if any(d.outline_width > 0.0 for d in data):
+            def outline_setup(b):
+                b.read(handles["edges"])
+                view.color = b.write(view.color)
+
+            graph.add_pass(f"toon_smoke.outline.{view.name}", outline_setup,
+                           lambda pc: self._draw_outline(pc, view, data, handles["edges"]))
+
+    def _view_uniforms(self, view: View) -> dict:
+        return dict(view_proj=view.view_proj.T.copy(), camera_pos=tuple(float(x) for x in view.camera_pos),
+                    camera_forward=tuple(float(x) for x in view.camera_forward), ortho=bool(view.ortho),
+                    sun_dir=tuple(float(x) for x in self.renderer.sun_direction),
+                    exposure=float(self.renderer.settings.exposure))
+
+    def _draw_surfaces(self, pc, view: View, data: list[VolumeDraw], edges_handle) -> None:
+        edges = pc.get(edges_handle)
+        self.renderer.framebuffer(edges).clear(0.0, 0.0, 0.0, 0.0)
+        fbo = self.renderer.framebuffer([pc.get(view.color), edges], pc.get(view.depth))
+        fbo.use()
+        self.ctx.enable(moderngl.DEPTH_TEST)
+        self.ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
+        prog = self._program()
+        set_uniforms(prog, **self._view_uniforms(view))
+        for draw in data:
+            gpu = self._upload(draw)
+            if gpu is not None and gpu.count:
+                self._ramp(draw.ramp).use(0)
+                set_uniforms(prog, model=draw.model.T.copy(), mode=0, ramp=0, object_id=float(2 * draw.index + 1))
+                gpu.vao.render(moderngl.TRIANGLES, vertices=gpu.count)
+            if draw.obstacle is not None:
+                centre, radius, colour = draw.obstacle
+                local = np.eye(4)
+                local[:3, :3] *= 2.0 * radius  # the primitive is a unit-diameter sphere
+                local[:3, 3] = centre
+                model = (draw.model.astype(np.float64) @ local).astype(np.float32)
+                set_uniforms(prog, model=model.T.copy(), mode=1, base_color=colour,
+                             object_id=float(2 * draw.index + 2))
+                self._sphere_vao().render(moderngl.TRIANGLES)
+
+    def _draw_outline(self, pc, view: View, data: list[VolumeDraw], edges_handle) -> None:
+        fbo = self.renderer.framebuffer(pc.get(view.color))
+        fbo.use()
+        self.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
+        if self._outline_vao is None:
+            prog = self.renderer.load_program(SHADERS, "outline")
+            self._outline_vao = self.ctx.vertex_array(prog, [])
+        prog = self._outline_vao.program
+        widths, thresholds, colors = [0.0] * MAX_VOLUMES, [0.0] * MAX_VOLUMES, [(0.0, 0.0, 0.0)] * MAX_VOLUMES
+        for draw in data:
+            widths[draw.index] = draw.outline_width
+            thresholds[draw.index] = draw.outline_threshold
+            colors[draw.index] = draw.outline_color
+        pc.get(edges_handle).use(0)
+        prog["edges"].value = 0
+        prog["widths"].value = widths
+        prog["thresholds"].value = thresholds
+        prog["colors"].value = colors
+        set_uniforms(prog, exposure=float(self.renderer.settings.exposure))
+        self._outline_vao.render(moderngl.TRIANGLES, vertices=3)
+
+    def release(self) -> None:
+        for mesh in self._meshes.values():
+            mesh.release()
+        self._meshes.clear()
+        for tex in self._ramps.values():
+            tex.release()
+        self._ramps.clear()
+        if self._sphere is not None:
+            self._sphere.release()
+            for buf in self._sphere_buffers:
+                buf.release()
+            self._sphere = None
+        if self._outline_vao is not None:
+            self._outline_vao.release()
+            self._outline_vao = None
+

@@ -1,0 +1,329 @@
+"""The ToonSmokeVolume step (seeds/002, figure 1), one phase per function so the benchmark can time each:
+
+1. :func:`update_obstacles` — solid cells from the volume's own sphere and other colliders;
+2. :func:`fluid_step` — stable fluids on the simulation grid (§3.1);
+3. :func:`display_step` — upsample to the display grid (§3.2), particles and blobs (§3.3), noise (§3.4);
+4. :func:`mesh_step` — the isosurface at D_iso (§3.5), re-meshed every step.
+
+Systems: ``toon_smoke.simulate`` (phases 1–3, simulation stage) and ``toon_smoke.mesh`` (phase 4, post-simulation).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from components.toon_smoke import SourceState, ToonSmokeState, ToonSmokeVolumeConfig
+from engine.collider import Collider
+from engine.spatial import Transform, quat_conjugate, quat_rotate
+from engine.world import World
+from systems.toon_smoke import fluid, poisson
+from systems.toon_smoke.display import blob_axes, extract_isosurface, noise_factor, splat_blobs
+from systems.toon_smoke.grid import Geometry, sample, sample_mac, upsample_linear
+
+_UP = np.array([0.0, 1.0, 0.0])
+
+
+# ------------------------------------------------------------------------------------------------ creation
+def new_state(cfg: ToonSmokeVolumeConfig, rng: np.random.Generator) -> ToonSmokeState:
+    """Zero fluid, particles at random positions (§3.3), the noise seed drawn from the entity's stream."""
+    nx, ny, nz = cfg.simulation_resolution
+    f32 = np.float32
+    geo = geometry_for(cfg)
+    state = ToonSmokeState(
+        u=np.zeros((nx + 1, ny, nz), f32), v=np.zeros((nx, ny + 1, nz), f32), w=np.zeros((nx, ny, nz + 1), f32),
+        density=np.zeros((nx, ny, nz), f32), temperature=np.zeros((nx, ny, nz), f32),
+        pressure=np.zeros((nx, ny, nz), f32), expansion=np.zeros((nx, ny, nz), f32),
+        particles=np.zeros((cfg.particle_count, 3)), particle_age=np.zeros(cfg.particle_count),
+        sources=[SourceState.from_config(s) for s in cfg.sources],
+        noise_seed=int(rng.integers(0, 2**31 - 1)),
+    )
+    state.geometry = geo
+    everyone = np.arange(cfg.particle_count)
+    state.particles[:] = spawn_positions(cfg, state, rng, len(everyone))
+    if cfg.particle_lifetime > 0.0:
+        state.particle_age[:] = rng.uniform(0.0, cfg.particle_lifetime, cfg.particle_count)
+    return state
+
+
+def geometry_for(cfg: ToonSmokeVolumeConfig) -> Geometry:
+    return Geometry.build(tuple(cfg.simulation_resolution), cfg.display_factor, cfg.extent)
+
+
+def _geometry(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState) -> Geometry:
+    if state.geometry is None:
+        state.geometry = geometry_for(cfg)
+    return state.geometry
+
+
+def time_step(cfg: ToonSmokeVolumeConfig, dt: float) -> float:
+    return float(cfg.time_step) if cfg.time_step is not None else float(dt)
+
+
+# ----------------------------------------------------------------------------------------------- obstacles
+def update_obstacles(world: World | None, entity: int, transform: Transform, cfg: ToonSmokeVolumeConfig,
+                     state: ToonSmokeState) -> None:
+    """Solid cells on both grids: the volume's sphere obstacle and, optionally, other entities' colliders.
+
+    Masks and the multigrid hierarchy are rebuilt only when the volume or an overlapping collider moved.
+    """
+    geo = _geometry(cfg, state)
+    colliders = _overlapping_colliders(world, entity, transform, cfg) if world is not None else []
+    key = (transform.position.tobytes(), transform.rotation.tobytes(),
+           tuple((e, t.position.tobytes(), t.rotation.tobytes(), t.scale.tobytes(), id(c), c.shape, c.radius,
+                  c.half_extents.tobytes(), c.offset) for e, t, c in colliders))
+    if state.solid is not None and state.solid_key == key:
+        return
+    state.solid = _solid_mask(geo.local_centres(), transform, cfg, colliders)
+    state.display_solid = _solid_mask(geo.local_display_centres(), transform, cfg, colliders)
+    state.hierarchy = poisson.build_hierarchy(state.solid, cfg.open_flags)
+    state.solid_key = key
+    for field_ in (state.density, state.temperature, state.pressure):
+        field_[state.solid] = 0.0
+
+
+def _overlapping_colliders(world: World, entity: int, transform: Transform, cfg: ToonSmokeVolumeConfig) -> list:
+    if not cfg.collide_with_colliders:
+        return []
+    reach = 0.5 * float(np.linalg.norm(cfg.extent))
+    found = []
+    for other, (t, collider) in world.query(Transform, Collider):
+        if other == entity or collider.is_trigger:
+            continue
+        gap = float(np.linalg.norm(t.position - transform.position)) - reach
+        if collider.shape == "sphere" and gap > collider.radius * float(np.max(np.abs(t.scale))):
+            continue
+        if collider.shape == "box" and gap > float(np.linalg.norm(collider.half_extents * t.scale)):
+            continue
+        if collider.shape == "heightfield":
+            top = t.position[1] + float(collider.heightfield.heights.max())
+            if transform.position[1] - reach > top:
+                continue
+        found.append((other, t, collider))
+    return found
+
+
+def _solid_mask(centres, transform: Transform, cfg: ToonSmokeVolumeConfig, colliders: list) -> np.ndarray:
+    x, y, z = np.broadcast_arrays(*centres)
+    solid = np.zeros(x.shape, bool)
+    if cfg.obstacle_radius > 0.0:
+        c = cfg.obstacle_center
+        solid |= (x - c[0]) ** 2 + (y - c[1]) ** 2 + (z - c[2]) ** 2 < cfg.obstacle_radius ** 2
+    if colliders:
+        local = np.stack([x.ravel(), y.ravel(), z.ravel()], axis=-1)
+        world_points = transform.position + quat_rotate(transform.rotation, local)
+        for _, t, collider in colliders:
+            solid |= (collider.signed_distance(world_points, t) < 0.0).reshape(x.shape)
+    return solid
+
+
+# ------------------------------------------------------------------------------------------------- fluid
+def apply_sources(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, dt: float,
+                  rng: np.random.Generator | None = None) -> None:
+    """Each active source adds density and heat inside its sphere and imposes its velocity (plus its seeded jitter)
+    there, in place."""
+    geo = _geometry(cfg, state)
+    x, y, z = geo.local_centres()
+    for source in state.sources:
+        if not source.active(state.time):
+            continue
+        p = source.position
+        inside = ((x - p[0]) ** 2 + (y - p[1]) ** 2 + (z - p[2]) ** 2) < source.radius ** 2
+        state.density += np.float32(source.density_rate * dt) * inside
+        state.temperature += np.float32(source.temperature_rate * dt) * inside
+        if source.radial_speed != 0.0:
+            state.expansion += np.float32(3.0 * source.radial_speed / source.radius) * inside
+        velocity = source.velocity
+        if source.velocity_jitter > 0.0 and rng is not None:
+            velocity = velocity + rng.uniform(-source.velocity_jitter, source.velocity_jitter, 3)
+        impose_velocity(geo, state, p, source.radius, velocity)
+    np.minimum(state.density, np.float32(cfg.density_limit), out=state.density)
+    np.minimum(state.temperature, np.float32(cfg.temperature_limit), out=state.temperature)
+
+
+def impose_velocity(geo: Geometry, state: ToonSmokeState, centre, radius: float, velocity) -> None:
+    """Set the face velocities inside a sphere to ``velocity`` (a jet or a chimney's draught), in place."""
+    for axis, comp in enumerate((state.u, state.v, state.w)):
+        fx, fy, fz = geo.local_faces(axis)
+        inside = (fx - centre[0]) ** 2 + (fy - centre[1]) ** 2 + (fz - centre[2]) ** 2 < radius ** 2
+        np.copyto(comp, np.float32(velocity[axis]), where=inside)
+
+
+def fluid_step(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, dt: float, up_local: np.ndarray,
+               rng: np.random.Generator | None = None) -> None:
+    """One stable-fluids step (Stam 1999): advect u, add forces and sources, diffuse, project; then advect,
+    diffuse and fade ρ and T with the divergence-free velocity."""
+    geo = _geometry(cfg, state)
+    h = geo.h
+    u, v, w = fluid.advect_velocity(geo, state.u, state.v, state.w, dt)
+    state.u, state.v, state.w = u, v, w
+    lift = np.float32(cfg.buoyancy) * state.temperature - np.float32(cfg.smoke_weight) * state.density
+    force = [lift * np.float32(up_local[a]) if abs(up_local[a]) > 1e-12 else None for a in range(3)]
+    if cfg.vorticity_confinement > 0.0:
+        vort = fluid.vorticity_force(u, v, w, h, cfg.vorticity_confinement)
+        force = [vort[a] if force[a] is None else force[a] + vort[a] for a in range(3)]
+    fluid.add_cell_force(u, v, w, tuple(force), dt)
+    apply_sources(cfg, state, dt, rng)
+    if cfg.viscosity > 0.0:
+        state.u, state.v, state.w = (fluid.diffuse(c, cfg.viscosity, dt, h, cfg.diffusion_iterations)
+                                     for c in (state.u, state.v, state.w))
+    fluid.enforce_solid_faces(state.u, state.v, state.w, state.hierarchy)
+    target = state.expansion if state.expansion.any() else None
+    state.pressure, state.divergence_before, state.divergence_after, state.pressure_iterations_used = fluid.project(
+        state.u, state.v, state.w, h, state.hierarchy, state.pressure, cfg.pressure_tolerance,
+        cfg.pressure_iterations, target)
+    if target is not None:
+        state.expansion = np.zeros_like(state.expansion)
+    density, temperature = fluid.advect_scalars(geo, [state.density, state.temperature], state.u, state.v,
+                                                state.w, dt)
+    if cfg.diffusion > 0.0:
+        density = fluid.diffuse(density, cfg.diffusion, dt, h, cfg.diffusion_iterations)
+        temperature = fluid.diffuse(temperature, cfg.diffusion, dt, h, cfg.diffusion_iterations)
+    if cfg.density_dissipation > 0.0:
+        density *= np.float32(1.0 / (1.0 + cfg.density_dissipation * dt))
+    if cfg.temperature_cooling > 0.0:
+        temperature *= np.float32(1.0 / (1.0 + cfg.temperature_cooling * dt))
+    density[state.solid] = 0.0
+    temperature[state.solid] = 0.0
+    state.density = np.clip(density, 0.0, cfg.density_limit).astype(np.float32, copy=False)
+    state.temperature = np.clip(temperature, 0.0, cfg.temperature_limit).astype(np.float32, copy=False)
+
+
+# ------------------------------------------------------------------------------------------------ particles
+def spawn_positions(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, rng: np.random.Generator, count: int
+                    ) -> np.ndarray:
+    """``count`` new particle positions (local metres): uniform in the box, or uniform in an active source."""
+    if count == 0:
+        return np.zeros((0, 3))
+    extent = np.asarray(cfg.extent, float)
+    active = [s for s in state.sources if s.active(state.time)]
+    if cfg.particle_spawn == "sources" and active:
+        which = rng.integers(0, len(active), count)
+        centres = np.array([s.position for s in active])[which]
+        radii = np.array([s.radius for s in active])[which]
+        direction = rng.standard_normal((count, 3))
+        direction /= np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-12)
+        radius = radii * np.cbrt(rng.random(count))
+        points = centres + direction * radius[:, None]
+        return np.clip(points, -0.5 * extent, 0.5 * extent)
+    return (rng.random((count, 3)) - 0.5) * extent
+
+
+def particle_velocity(geo: Geometry, state: ToonSmokeState, local: np.ndarray) -> np.ndarray:
+    """Fluid velocity (m/s) at local positions, each component from its staggered grid."""
+    cells = geo.to_cells(local)
+    return np.stack(sample_mac(state.u, state.v, state.w, cells[:, 0], cells[:, 1], cells[:, 2]), axis=-1)
+
+
+def advect_particles(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, dt: float, rng: np.random.Generator
+                     ) -> None:
+    """Move particles with the flow (midpoint rule); rebirth those that left, entered a solid or grew old."""
+    geo = _geometry(cfg, state)
+    p = state.particles
+    if len(p) == 0:
+        state.particle_velocity = np.zeros((0, 3))
+        return
+    mid = p + 0.5 * dt * particle_velocity(geo, state, p)
+    p = p + dt * particle_velocity(geo, state, mid)
+    state.particle_age += dt
+    half = 0.5 * np.asarray(cfg.extent, float)
+    reborn = np.any(np.abs(p) > half, axis=1)
+    if state.display_solid is not None and state.display_solid.any():
+        reborn |= _nearest(state.display_solid, geo.to_cells(p) * geo.factor)
+    if cfg.particle_lifetime > 0.0:
+        reborn |= state.particle_age >= cfg.particle_lifetime
+    count = int(reborn.sum())
+    if count:
+        p[reborn] = spawn_positions(cfg, state, rng, count)
+        state.particle_age[reborn] = 0.0
+    state.particles = p
+    state.particle_velocity = particle_velocity(geo, state, p)
+
+
+def _nearest(mask: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    index = np.clip(np.floor(cells).astype(np.intp), 0, np.array(mask.shape) - 1)
+    return mask[index[:, 0], index[:, 1], index[:, 2]]
+
+
+# ------------------------------------------------------------------------------------------------ display
+def display_step(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, dt: float, rng: np.random.Generator) -> None:
+    """Display density = noise × (upsampled ρ + particle blobs), clamped to [0, density_limit] (§3.2–3.4)."""
+    geo = _geometry(cfg, state)
+    display = upsample_linear(state.density, geo.factor)
+    advect_particles(cfg, state, dt, rng)
+    state.blob_count = add_particle_blobs(cfg, state, display)
+    display *= _masked_noise(cfg, state, geo)
+    np.minimum(display, np.float32(cfg.density_limit), out=display)  # every term is ≥ 0 already
+    state.display_density = display
+
+
+def _masked_noise(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, geo: Geometry) -> np.ndarray:
+    """The noise factor of §3.4 (computed once: it depends on position alone), zeroed in solid display cells."""
+    key = ("noise", state.noise_seed, state.solid_key)
+    if state.noise_factor is None or state.noise_key != key:
+        if state.noise_base is None:
+            state.noise_base = noise_factor(geo, state.noise_seed, cfg.noise_scale, cfg.noise_strength,
+                                            cfg.noise_octaves)
+        factor = state.noise_base.copy()
+        if state.display_solid is not None:
+            factor[state.display_solid] = 0.0
+        state.noise_factor, state.noise_key = factor, key
+    return state.noise_factor
+
+
+def add_particle_blobs(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, display: np.ndarray) -> int:
+    """Where the density at a particle exceeds D_p, splat its velocity-stretched ellipsoid (figure 2)."""
+    geo = _geometry(cfg, state)
+    if len(state.particles) == 0:
+        return 0
+    cells = geo.to_cells(state.particles) * geo.factor - 0.5  # display index space
+    rho = sample(display, cells[:, 0], cells[:, 1], cells[:, 2])
+    active = rho > cfg.particle_density_threshold
+    if not active.any():
+        return 0
+    vel = state.particle_velocity[active]
+    speed = np.linalg.norm(vel, axis=1)
+    direction = np.divide(vel, speed[:, None], out=np.tile([0.0, 1.0, 0.0], (len(vel), 1)),
+                          where=speed[:, None] > 0)
+    along, across = blob_axes(rho[active], speed, cfg.particle_density_threshold, cfg.blob_radius,
+                              cfg.blob_radius_per_density, cfg.blob_radius_max, cfg.blob_stretch,
+                              cfg.blob_stretch_max)
+    cell = geo.h / geo.factor
+    return splat_blobs(display, cells[active], direction, along / cell, across / cell, cfg.blob_density)
+
+
+# --------------------------------------------------------------------------------------------------- mesh
+def mesh_step(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState) -> None:
+    """Re-mesh the display density at D_iso (§3.5)."""
+    geo = _geometry(cfg, state)
+    if state.display_density is None:
+        return
+    cell = geo.h / geo.factor
+    origin = -0.5 * geo.extent + 0.5 * cell
+    state.mesh_vertices, state.mesh_normals, state.mesh_faces = extract_isosurface(
+        state.display_density, cfg.iso_density, cell, origin)
+    state.mesh_version += 1
+
+
+# ---------------------------------------------------------------------------------------------- the systems
+def step_volume(world: World | None, entity: int, transform: Transform, cfg: ToonSmokeVolumeConfig,
+                state: ToonSmokeState, dt: float, rng: np.random.Generator) -> None:
+    """Phases 1–3 for one volume and one step of ``dt`` seconds."""
+    update_obstacles(world, entity, transform, cfg, state)
+    up_local = quat_rotate(quat_conjugate(transform.rotation), _UP)
+    fluid_step(cfg, state, dt, up_local, rng)
+    display_step(cfg, state, dt, rng)
+    state.time += dt
+    state.steps += 1
+
+
+def simulate_system(world: World, dt: float) -> None:
+    """Simulation stage: step every ToonSmokeVolume (ascending entity id)."""
+    for entity, (transform, cfg, state) in world.query(Transform, ToonSmokeVolumeConfig, ToonSmokeState):
+        step_volume(world, entity, transform, cfg, state, time_step(cfg, dt),
+                    world.random.stream("toon_smoke", entity))
+
+
+def mesh_system(world: World, dt: float) -> None:
+    """Post-simulation stage: extract every volume's isosurface."""
+    for _, (cfg, state) in world.query(ToonSmokeVolumeConfig, ToonSmokeState):
+        mesh_step(cfg, state)

@@ -1,0 +1,153 @@
+"""Shared geometry for the water plugin: the grid frame, bodies as arrays, bilinear sampling, convex polygons.
+
+Grid units: a world point (x, z) has grid coordinates (u, v) = ((x − x0)/h, (z − z0)/h), so vertex P[i, j] sits at
+(u, v) = (i, j) and ``heights[j, i]`` is its height. Polygons are counter-clockwise in (u, v) and padded to a
+common vertex count V; ``counts[b]`` says how many of body b's vertices are real.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+F64 = NDArray[np.float64]
+I64 = NDArray[np.int64]
+
+BOX, SPHERE = 0, 1
+EPS_LINE = 1e-7  # grid units: closer than this to a grid line counts as "on" it
+NUDGE = 1e-4  # grid units: how far a point on a grid line is moved inwards (figure 2.3)
+
+
+@dataclass(frozen=True)
+class Grid:
+    """Where a water grid lies in the world: nx × nz vertices, spacing h, P[0, 0] at (x0, z0), rest level y0."""
+
+    nx: int
+    nz: int
+    h: float
+    x0: float
+    z0: float
+    y0: float
+
+    def to_uv(self, xz: F64) -> F64:
+        """World (x, z) (..., 2) → grid units (u, v)."""
+        return (xz - np.array([self.x0, self.z0])) / self.h
+
+    def to_xz(self, uv: F64) -> F64:
+        """Grid units (u, v) (..., 2) → world (x, z)."""
+        return uv * self.h + np.array([self.x0, self.z0])
+
+    def inside(self, uv: F64) -> NDArray[np.bool_]:
+        """True where (u, v) lies on the grid's footprint [0, nx − 1] × [0, nz − 1] (borders included)."""
+        return ((uv[..., 0] >= 0.0) & (uv[..., 0] <= self.nx - 1)
+                & (uv[..., 1] >= 0.0) & (uv[..., 1] <= self.nz - 1))
+
+
+@dataclass
+class Bodies:
+    """Bodies at one instant as arrays over B: entity ids, shape codes, world sizes, positions and rotations."""
+
+    entities: I64  # (B,)
+    shapes: NDArray[np.int8]  # (B,) BOX or SPHERE
+    half: F64  # (B, 3) box half extents in world units (local half extents × |scale|)
+    radius: F64  # (B,) sphere radius in world units
+    position: F64  # (B, 3)
+    rotation: F64  # (B, 3, 3) rotation matrices (column vectors: world = R @ local)
+
+    def __len__(self) -> int:
+        return len(self.entities)
+
+    def take(self, index) -> Bodies:
+        return Bodies(self.entities[index], self.shapes[index], self.half[index], self.radius[index],
+                      self.position[index], self.rotation[index])
+
+    def horizontal_half(self) -> F64:
+        """(B, 2) half size of each body's axis-aligned footprint in x and z."""
+        box = np.einsum("bij,bj->bi", np.abs(self.rotation), self.half)[:, [0, 2]]
+        return np.where((self.shapes == SPHERE)[:, None], self.radius[:, None], box)
+
+    def vertical_half(self) -> F64:
+        """(B,) half height of each body's vertical extent."""
+        box = np.einsum("bj,bj->b", np.abs(self.rotation[:, 1, :]), self.half)
+        return np.where(self.shapes == SPHERE, self.radius, box)
+
+
+def empty_bodies() -> Bodies:
+    return Bodies(np.zeros(0, np.int64), np.zeros(0, np.int8), np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)),
+                  np.zeros((0, 3, 3)))
+
+
+def bilinear(field: F64, uv: F64) -> F64:
+    """Bilinear height of ``field[j, i]`` at (u, v) (..., 2), clamped to the grid (eq. 2.2; on a grid edge it is the
+    linear interpolation of eq. 2.3 / 2.4)."""
+    nz, nx = field.shape
+    u = np.clip(uv[..., 0], 0.0, nx - 1)
+    v = np.clip(uv[..., 1], 0.0, nz - 1)
+    i = np.minimum(u.astype(np.int64), nx - 2)
+    j = np.minimum(v.astype(np.int64), nz - 2)
+    tu, tv = u - i, v - j
+    z00, z10 = field[j, i], field[j, i + 1]
+    z01, z11 = field[j + 1, i], field[j + 1, i + 1]
+    bottom = z00 + tu * (z10 - z00)
+    top = z01 + tu * (z11 - z01)
+    return bottom + tv * (top - bottom)
+
+
+def bilinear_with_slope(field: F64, uv: F64) -> tuple[F64, F64, F64]:
+    """Bilinear value and its derivatives ∂/∂u, ∂/∂v (per grid unit) at (u, v), clamped to the grid."""
+    nz, nx = field.shape
+    u = np.clip(uv[..., 0], 0.0, nx - 1)
+    v = np.clip(uv[..., 1], 0.0, nz - 1)
+    i = np.minimum(u.astype(np.int64), nx - 2)
+    j = np.minimum(v.astype(np.int64), nz - 2)
+    tu, tv = u - i, v - j
+    z00, z10 = field[j, i], field[j, i + 1]
+    z01, z11 = field[j + 1, i], field[j + 1, i + 1]
+    bottom = z00 + tu * (z10 - z00)
+    top = z01 + tu * (z11 - z01)
+    du = (1.0 - tv) * (z10 - z00) + tv * (z11 - z01)
+    return bottom + tv * (top - bottom), du, top - bottom
+
+
+def polygon_edges(polygons: F64, counts: I64) -> tuple[F64, F64, NDArray[np.bool_]]:
+    """Start and end points (B, V, 2) of every polygon edge k → k + 1 (cyclic) and which edges are real."""
+    B, V = polygons.shape[:2]
+    k = np.arange(V)
+    valid = k[None, :] < counts[:, None]
+    nxt = np.where(k[None, :] + 1 < counts[:, None], k[None, :] + 1, 0)
+    end = np.take_along_axis(polygons, nxt[:, :, None], axis=1)
+    return polygons, end, valid
+
+
+def inside_polygons(points: F64, polygons: F64, counts: I64, margin: float = 1e-9) -> NDArray[np.bool_]:
+    """Whether ``points[p]`` (P, 2) lies inside the convex CCW polygon ``polygons[p]`` (P, V, 2).
+
+    Inside means left of every edge by more than ``margin`` (grid units): (b − a) × (p − a) / |b − a| > margin.
+    A positive margin excludes the outline itself, a negative one includes it. Polygons with fewer than 3
+    vertices contain nothing.
+    """
+    if len(points) == 0:
+        return np.zeros(0, bool)
+    a, b, valid = polygon_edges(polygons, counts)
+    e = b - a
+    r = points[:, None, :] - a
+    cross = e[..., 0] * r[..., 1] - e[..., 1] * r[..., 0]
+    length = np.hypot(e[..., 0], e[..., 1])
+    return np.all((cross > margin * length) | ~valid, axis=1) & (counts >= 3)
+
+
+def polygon_area(polygons: F64, counts: I64) -> F64:
+    """Signed area (B,) of each padded polygon (positive when counter-clockwise), shoelace formula."""
+    a, b, valid = polygon_edges(polygons, counts)
+    cross = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return 0.5 * np.sum(np.where(valid, cross, 0.0), axis=1)
+
+
+def ranges(lo: I64, count: I64) -> tuple[I64, I64]:
+    """For runs r with ``count[r]`` members starting at ``lo[r]``: (run index, value) of every member, flattened."""
+    total = int(count.sum())
+    run = np.repeat(np.arange(len(count)), count)
+    starts = np.cumsum(count) - count
+    return run, lo[run] + (np.arange(total) - starts[run])

@@ -1,0 +1,294 @@
+"""The re-triangulated water mesh (seeds/003, section 2.2.4, figures 2.7–2.10 and 3.2), vectorized.
+
+Squares C[i, j] holding no added point keep the base model's two triangles (P[i,j], P[i+1,j], P[i,j+1]) and
+(P[i+1,j], P[i+1,j+1], P[i,j+1]). A square holding added points is cut along the body outline: its boundary
+(corners and the added points on its edges, counter-clockwise) and the outline segments inside it form a planar
+graph whose faces are walked with a "next half-edge" rule; every face is then ear-clipped. The result is a
+conforming mesh (no T-junctions: each square edge carries the same added points on both sides) that contains
+every outline segment as an edge, for any number of added points per square (the paper's cases of 2, 3 and 4
+points are special cases). A body whose whole outline lies inside one square becomes a hole, joined to the
+square's corner by a bridge edge before ear clipping.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from systems.water_surface.geometry import F64, I64, Grid, bilinear_with_slope
+
+__all__ = ["WaterMesh", "base_triangles", "retriangulate", "vertex_arrays", "wire_arrays"]
+
+
+@dataclass
+class WaterMesh:
+    """Triangles over the vertices [grid vertices (nx·nz, row-major j·nx + i), added points (M)]."""
+
+    triangles: I64  # (T, 3)
+    cells: I64  # squares that were re-triangulated (j·(nx − 1) + i)
+    outline: I64  # (K, 2) outline segments as vertex ids
+
+
+def base_triangles(nx: int, nz: int, cells: I64 | None = None) -> I64:
+    """The base model's two triangles per square (section 2.2.1, figure 2.2), for all or the given squares."""
+    if cells is None:
+        cells = np.arange((nx - 1) * (nz - 1))
+    j, i = np.divmod(cells, nx - 1)
+    p00 = j * nx + i
+    p10, p01, p11 = p00 + 1, p00 + nx, p00 + nx + 1
+    return np.stack([np.stack([p00, p10, p01], -1), np.stack([p10, p11, p01], -1)], axis=1).reshape(-1, 3)
+
+
+@lru_cache(maxsize=8)
+def _all_base(nx: int, nz: int) -> I64:
+    tris = base_triangles(nx, nz).reshape(-1, 6)
+    tris.setflags(write=False)
+    return tris
+
+
+def retriangulate(nx: int, nz: int, uv: F64, kind: np.ndarray, segments: I64) -> WaterMesh:
+    """The water mesh with the squares crossed by the outline re-triangulated (section 2.2.4)."""
+    g = nx * nz
+    if len(segments) == 0:
+        return WaterMesh(_all_base(nx, nz).reshape(-1, 3), np.zeros(0, np.int64), np.zeros((0, 2), np.int64))
+    cell_of = _segment_cells(nx, nz, uv, segments)
+    cells, local = np.unique(cell_of, return_inverse=True)
+    faces, positions, lengths = _faces(nx, uv, kind, segments, cells, local)
+    triangles = _ear_clip(faces, positions, lengths)
+    triangles = np.where(triangles < 0, g - 1 - triangles, triangles)  # added point p → vertex g + p
+    keep = np.ones((nx - 1) * (nz - 1), bool)
+    keep[cells] = False
+    regular = _all_base(nx, nz)[keep].reshape(-1, 3)
+    return WaterMesh(np.concatenate([regular, triangles]), cells, segments + g)
+
+
+def vertex_arrays(grid: Grid, heights: F64, point_uv: F64, point_heights: F64) -> tuple[F64, F64]:
+    """World positions and unit normals (N, 3) of the mesh vertices: the grid vertices, then the added points.
+
+    Normals come from the height field: central differences at the grid vertices, the bilinear slope at the
+    added points.
+    """
+    nz, nx = heights.shape
+    xs = grid.x0 + np.arange(nx) * grid.h
+    zs = grid.z0 + np.arange(nz) * grid.h
+    gx, gz = np.meshgrid(xs, zs)
+    dz, dx = np.gradient(heights, grid.h)
+    grid_pos = np.stack([gx, grid.y0 + heights, gz], -1).reshape(-1, 3)
+    grid_n = np.stack([-dx, np.ones_like(dx), -dz], -1).reshape(-1, 3)
+    _, du, dv = bilinear_with_slope(heights, point_uv)
+    xz = grid.to_xz(point_uv)
+    point_pos = np.stack([xz[:, 0], grid.y0 + point_heights, xz[:, 1]], -1)
+    point_n = np.stack([-du / grid.h, np.ones(len(point_uv)), -dv / grid.h], -1)
+    normals = np.concatenate([grid_n, point_n])
+    return np.concatenate([grid_pos, point_pos]), normals / np.linalg.norm(normals, axis=1, keepdims=True)
+
+
+def wire_arrays(positions: F64, mesh: WaterMesh, edge_color=(0.05, 0.1, 0.15),
+                outline_color=(1.0, 0.45, 0.05)) -> F64:
+    """Line-list vertices (position, colour) of every triangle edge, then the outline segments on top (fig. 3.2)."""
+    t = mesh.triangles
+    edges = np.stack([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]], 1).reshape(-1, 2)
+    pairs = np.concatenate([edges, mesh.outline])
+    colors = np.where((np.arange(len(pairs)) < len(edges))[:, None], edge_color, outline_color)
+    pos = positions[pairs.ravel()]
+    return np.concatenate([pos, np.repeat(colors, 2, axis=0)], axis=1)
+
+
+def _segment_cells(nx: int, nz: int, uv: F64, segments: I64) -> I64:
+    mid = 0.5 * (uv[segments[:, 0]] + uv[segments[:, 1]])
+    ci = np.clip(np.floor(mid[:, 0]).astype(np.int64), 0, nx - 2)
+    cj = np.clip(np.floor(mid[:, 1]).astype(np.int64), 0, nz - 2)
+    return cj * (nx - 1) + ci
+
+
+def _faces(nx: int, uv: F64, kind: np.ndarray, segments: I64, cells: I64, local: I64):
+    """Faces of every crossed square as padded vertex-id and position arrays, counter-clockwise."""
+    c = len(cells)
+    k = len(segments)
+    m = len(uv)
+    cj, ci = np.divmod(cells, nx - 1)
+    # Ring entries: the 4 corners of every crossed square, then the crossings that end its outline segments.
+    corner_uv = np.stack([ci, cj], -1)[:, None, :] + np.array([[0, 0], [1, 0], [1, 1], [0, 1]])[None]
+    ring_cell = [np.repeat(np.arange(c), 4)]
+    ring_s = [np.tile(np.arange(4.0), c)]
+    ring_vertex = [(corner_uv[..., 1] * nx + corner_uv[..., 0]).ravel()]  # grid vertex ids
+    ends = np.concatenate([segments[:, 0], segments[:, 1]])
+    end_cell = np.concatenate([local, local])
+    crossing = kind[ends] < 2
+    e_pt, e_cell = ends[crossing], end_cell[crossing]
+    ring_cell.append(e_cell)
+    ring_s.append(_ring_parameter(uv[e_pt], kind[e_pt], ci[e_cell], cj[e_cell]))
+    ring_vertex.append(-1 - e_pt)  # added points as negative ids until the end
+    ring_cell = np.concatenate(ring_cell)
+    ring_s = np.concatenate(ring_s)
+    ring_vertex = np.concatenate(ring_vertex)
+    order = np.lexsort((ring_s, ring_cell))
+    ring_cell, ring_vertex = ring_cell[order], ring_vertex[order]
+    r = len(ring_cell)
+    start = np.searchsorted(ring_cell, np.arange(c))
+    ring_next = np.arange(1, r + 1)
+    last = np.r_[ring_cell[1:] != ring_cell[:-1], True]
+    ring_next[last] = start[ring_cell[last]]
+    # Half-edges: ring e in [0, r), forward segment s at r + s, backward at r + k + s.
+    h = r + 2 * k
+    head = np.concatenate([ring_vertex, -1 - segments[:, 0], -1 - segments[:, 1]])  # vertex each starts at
+    nxt = np.empty(h, np.int64)
+    # lookups keyed by (square, added point)
+    ring_key = ring_cell * (m + 1) + np.where(ring_vertex < 0, -1 - ring_vertex, m)
+    seg_key_a = local * (m + 1) + segments[:, 0]
+    seg_key_b = local * (m + 1) + segments[:, 1]
+    # ring edge ending at a corner: continue along the ring; at a crossing: leave along the outline segment
+    end_entry = ring_next
+    end_vertex = ring_vertex[end_entry]
+    at_corner = end_vertex >= 0
+    nxt[:r][at_corner] = end_entry[at_corner]
+    cross_key = ring_key[end_entry[~at_corner]]
+    fwd = _lookup(seg_key_a, cross_key)
+    bwd = _lookup(seg_key_b, cross_key)
+    nxt[:r][~at_corner] = np.where(fwd >= 0, r + fwd, r + k + bwd)
+    # outline edges: at a crossing turn onto the ring (counter-clockwise), at a vertex L' continue the outline
+    seg_from = -np.ones(m, np.int64)
+    seg_from[segments[:, 0]] = np.arange(k)
+    seg_to = -np.ones(m, np.int64)
+    seg_to[segments[:, 1]] = np.arange(k)
+    b_end, a_end = segments[:, 1], segments[:, 0]
+    ring_sorter = np.argsort(ring_key)
+    f_cross = kind[b_end] < 2
+    nxt[r:r + k] = np.where(f_cross, _lookup(ring_key, seg_key_b, ring_sorter), r + seg_from[b_end])
+    b_cross = kind[a_end] < 2
+    nxt[r + k:] = np.where(b_cross, _lookup(ring_key, seg_key_a, ring_sorter), r + k + seg_to[a_end])
+    head, nxt = _bridge_holes(nx, uv, head, nxt, r, k, segments, cells, local, ring_cell, ring_vertex, ring_next)
+    return _walk(head, nxt, nx, uv)
+
+
+def _ring_parameter(uv: F64, kind: np.ndarray, ci: I64, cj: I64) -> F64:
+    """Position s ∈ [0, 4) of a crossing on its square's boundary, counter-clockwise from corner (i, j)."""
+    du, dv = uv[:, 0] - ci, uv[:, 1] - cj
+    on_u = kind == 0  # on a line u = const: the left (du ≈ 0) or right (du ≈ 1) side
+    left = on_u & (du < 0.5)
+    right = on_u & ~left
+    bottom = ~on_u & (dv < 0.5)
+    return np.select([bottom, right, left], [du, 1.0 + dv, 3.0 + (1.0 - dv)], 2.0 + (1.0 - du))
+
+
+def _lookup(keys: I64, query: I64, sorter: I64 | None = None) -> I64:
+    """Index of each query in ``keys`` (unique), or −1."""
+    if sorter is None:
+        sorter = np.argsort(keys)
+    if len(keys) == 0:
+        return -np.ones(len(query), np.int64)
+    pos = np.minimum(np.searchsorted(keys, query, sorter=sorter), len(keys) - 1)
+    found = sorter[pos]
+    return np.where(keys[found] == query, found, -1)
+
+
+def _cycles(nxt: I64) -> I64:
+    """Smallest half-edge index of every half-edge's cycle (pointer jumping)."""
+    rep = np.arange(len(nxt))
+    jump = nxt.copy()
+    for _ in range(int(np.ceil(np.log2(max(len(nxt), 2)))) + 1):
+        rep = np.minimum(rep, rep[jump])
+        jump = jump[jump]
+    return rep
+
+
+def _bridge_holes(nx, uv, head, nxt, r, k, segments, cells, local, ring_cell, ring_vertex, ring_next):
+    """Join each outline that lies wholly inside one square (a hole) to that square's corner (i + 1, j + 1)."""
+    rep = _cycles(nxt)
+    backward = np.arange(r + k, r + 2 * k)
+    reps = np.unique(rep[backward])
+    holes = [q for q in reps if not np.any(rep[:r] == q) and q >= r + k]
+    if not holes:
+        return head, nxt
+    head, nxt = list(head), list(nxt)
+    for q in holes:  # one per small body
+        members = np.flatnonzero(rep == q)
+        pts = -1 - np.asarray(head)[members]
+        best = members[np.argmax(uv[pts, 0] + uv[pts, 1])]  # the backward half-edge leaving v*
+        v_star = head[best]
+        into = int(np.flatnonzero(np.asarray(nxt) == best)[0])  # the hole's half-edge ending at v*
+        cell = local[best - r - k]
+        cj, ci = divmod(int(cells[cell]), nx - 1)
+        corner = (cj + 1) * nx + ci + 1
+        entries = np.flatnonzero((ring_cell == cell) & (ring_vertex == corner))
+        out_ring = int(entries[0])  # ring half-edge leaving the corner
+        in_ring = int(np.flatnonzero(ring_next == out_ring)[0])
+        bridge_in, bridge_out = len(head), len(head) + 1
+        head += [corner, v_star]
+        nxt += [best, out_ring]
+        nxt[in_ring] = bridge_in
+        nxt[into] = bridge_out
+    return np.asarray(head, np.int64), np.asarray(nxt, np.int64)
+
+
+def _walk(head: I64, nxt: I64, nx: int, uv: F64):
+    """Vertex ids and positions of every face (padded), walking each cycle once."""
+    rep = _cycles(nxt)
+    starts, lengths = np.unique(rep, return_counts=True)
+    longest = int(lengths.max())
+    faces = np.zeros((len(starts), longest), np.int64)
+    cur = starts.copy()
+    for step in range(longest):  # one step along every face at once
+        faces[:, step] = head[cur]
+        cur = nxt[cur]
+    grid_uv = np.stack([np.mod(faces, nx), faces // nx], -1).astype(np.float64)
+    pts = uv[np.clip(-1 - faces, 0, max(len(uv) - 1, 0))] if len(uv) else grid_uv
+    positions = np.where((faces < 0)[..., None], pts, grid_uv)
+    return faces, positions, lengths
+
+
+def _ear_clip(faces: I64, positions: F64, lengths: I64) -> I64:
+    """Triangulate simple counter-clockwise polygons (padded, all at once) by ear clipping."""
+    f, width = faces.shape
+    slot = np.arange(width)
+    alive = slot[None, :] < lengths[:, None]
+    nxt = np.where(slot[None, :] + 1 < lengths[:, None], slot[None, :] + 1, 0)
+    prv = np.where(slot[None, :] > 0, slot[None, :] - 1, lengths[:, None] - 1)
+    remaining = lengths.copy()
+    rows = np.arange(f)
+    out = []
+    scale = 1e-12
+    for _ in range(width - 2):  # one ear per face per pass
+        active = remaining >= 3
+        if not active.any():
+            break
+        a = np.take_along_axis(positions, prv[..., None], 1)
+        c = np.take_along_axis(positions, nxt[..., None], 1)
+        b = positions
+        ab, bc = b - a, c - b
+        turn = ab[..., 0] * bc[..., 1] - ab[..., 1] * bc[..., 0]
+        convex = alive & (turn > scale)
+        blocked = _blocked(positions, alive, a, b, c, scale)
+        ear = convex & ~blocked
+        pick = np.where(ear.any(1), np.argmax(ear, 1), np.argmax(np.where(alive, turn, -np.inf), 1))
+        pick = np.where(remaining == 3, np.argmax(alive, 1), pick)
+        pa, pc = prv[rows, pick], nxt[rows, pick]
+        tri = np.stack([faces[rows, pa], faces[rows, pick], faces[rows, pc]], -1)
+        area = turn[rows, pick]
+        emit = active & (np.abs(area) > scale)
+        out.append(tri[emit])
+        act = np.flatnonzero(active)
+        nxt[act, pa[act]] = pc[act]
+        prv[act, pc[act]] = pa[act]
+        alive[act, pick[act]] = False
+        remaining[act] -= 1
+    return np.concatenate(out) if out else np.zeros((0, 3), np.int64)
+
+
+def _blocked(positions: F64, alive: np.ndarray, a: F64, b: F64, c: F64, eps: float) -> np.ndarray:
+    """(F, L): whether another live vertex lies inside or on the triangle (a, b, c) of each candidate ear."""
+    q = positions[:, None, :, :]  # test points along axis 2
+    A, B, C = a[:, :, None, :], b[:, :, None, :], c[:, :, None, :]
+
+    def side(p0, p1):
+        e = p1 - p0
+        r = q - p0
+        return e[..., 0] * r[..., 1] - e[..., 1] * r[..., 0]
+
+    inside = (side(A, B) >= -eps) & (side(B, C) >= -eps) & (side(C, A) >= -eps)
+    same = np.zeros(inside.shape, bool)
+    for corner in (A, B, C):
+        same |= np.sum((q - corner) ** 2, axis=-1) < 1e-20
+    return np.any(inside & ~same & alive[:, None, :], axis=2)

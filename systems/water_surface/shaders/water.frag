@@ -1,0 +1,38 @@
+#version 330
+#include "lit.glsl"
+// Water: sky reflection weighted by Schlick's Fresnel term (F0 = 0.02, water's index 1.33), sun glint, and a
+// body colour tinted from shallow to deep by the light's path through the water down to the pool floor
+// (Beer-Lambert, 1 - exp(-path / clarity)). Output is premultiplied: the scene behind shows through by
+// (1 - F) * exp(-path / clarity).
+uniform vec3 shallow_color;
+uniform vec3 deep_color;
+uniform float clarity;
+uniform float floor_y;
+in vec3 v_pos;
+in vec3 v_normal;
+out vec4 frag;
+const float F0 = 0.02;
+vec3 sky(vec3 dir) {
+    float up = clamp(dir.y, 0.0, 1.0);
+    vec3 col = mix(sky_horizon, sky_top, pow(up, 0.6));
+    return mix(col, sky_horizon * 0.55, clamp(-dir.y * 3.0, 0.0, 1.0));
+}
+void main() {
+    vec3 n = normalize(v_normal);
+    vec3 v = normalize(camera_pos - v_pos);
+    if (dot(n, v) < 0.0) n = normalize(n - 2.0 * dot(n, v) * v);  // seen edge-on: keep the normal facing us
+    float cos_v = clamp(dot(n, v), 0.0, 1.0);
+    float fresnel = F0 + (1.0 - F0) * pow(1.0 - cos_v, 5.0);
+    vec3 r = reflect(-v, n);
+    vec3 reflected = sky(r) + sun_color * pow(max(dot(r, sun_dir), 0.0), 300.0) * 6.0;
+    float depth = max(v_pos.y - floor_y, 0.0);
+    float path = depth / max(v.y, 0.2) + depth;  // down to the floor and back up
+    float absorbed = 1.0 - exp(-path / clarity);
+    float light = ambient + max(dot(n, sun_dir), 0.0) * 0.6;
+    vec3 body = mix(shallow_color, deep_color, absorbed) * light;
+    vec3 color = (1.0 - fresnel) * absorbed * body + fresnel * reflected;
+    float alpha = 1.0 - (1.0 - fresnel) * (1.0 - absorbed);
+    float f = 1.0 - exp(-length(camera_pos - v_pos) * fog_density);
+    color = mix(color, sky_horizon * alpha, clamp(f, 0.0, 1.0));
+    frag = vec4(color, alpha);
+}

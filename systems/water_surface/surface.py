@@ -1,0 +1,205 @@
+"""One simulation step of a water surface with the bodies that cut it (pure numpy; the world-facing systems are in
+``simulate.py``).
+
+Order inside a step (seeds/003): random drops and impact dents → the plane S' of each body (mean water height
+under it) → cross-section D' (2.2.2), nudged (fig. 2.3) → added points (2.2.3) carrying their heights from the
+last step (or lifted onto the surface, eq. 2.2–2.4, when new) → wave generation ±α·d(t) (eq. 2.5–2.7) →
+propagation (eq. 2.8–2.12) with the vertices inside bodies held as obstacles → damping. With
+``wave_source = "grid"`` the added points are replaced by the older column displacement (``grid_source``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from components.water_surface import WaterState, WaterSurface
+from systems.water_surface.geometry import F64, I64, Bodies, Grid, bilinear
+from systems.water_surface.grid_source import column_depths
+from systems.water_surface.outline import (AddedPoints, Sections, added_points, coupling_pairs, cross_sections,
+                                           nudge, outline_impulse, solid_vertices)
+from systems.water_surface.waves import courant_k, dents, free_degree, propagate
+
+__all__ = ["StepReport", "plane_levels", "step_water"]
+
+
+@dataclass
+class StepReport:
+    """What one step did (for tests, benchmarks and the debug view)."""
+
+    bodies: Bodies
+    plane_y: F64
+    sections: Sections | None = None
+    points: AddedPoints | None = None
+    change: F64 = field(default_factory=lambda: np.zeros(0))  # ±α·d(t) per added point
+    raised: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    lowered: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    solid: I64 = field(default_factory=lambda: np.zeros(0, np.int64))
+    column_change: F64 | None = None  # 'grid' method: α·(b(t) − b(t−1)) per vertex
+
+
+def plane_levels(z: F64, solid: np.ndarray, bodies: Bodies, grid: Grid) -> F64:
+    """S'_z − y0 for each body: the mean height of the water vertices under its footprint (section 2.2.2); the
+    vertices that were inside a body at the last step are not water and do not count (unless nothing else is
+    there: then they hold the last S')."""
+    centre = grid.to_uv(bodies.position[:, [0, 2]])
+    half = bodies.horizontal_half() / grid.h
+    lo = np.maximum(np.ceil(centre - half), 0).astype(np.int64)
+    hi = np.minimum(np.floor(centre + half), [grid.nx - 1, grid.nz - 1]).astype(np.int64)
+    levels = bilinear(z, centre)
+    for b in range(len(bodies)):  # one slice mean per body
+        if lo[b, 0] <= hi[b, 0] and lo[b, 1] <= hi[b, 1]:
+            window = (slice(lo[b, 1], hi[b, 1] + 1), slice(lo[b, 0], hi[b, 0] + 1))
+            water = ~solid[window]
+            levels[b] = z[window][water].mean() if water.any() else z[window].mean()
+    return levels
+
+
+def _water_mean(field: F64, solid: I64 | None) -> float:
+    """Mean height of the vertices that are water (all but the flat indices ``solid``)."""
+    if solid is None:
+        return float(field.mean())
+    return float((field.sum() - field.ravel()[solid].sum()) / (field.size - len(solid)))
+
+
+def _near(bodies: Bodies, grid: Grid, state: WaterState, depth: float) -> np.ndarray:
+    centre = grid.to_uv(bodies.position[:, [0, 2]])
+    half = bodies.horizontal_half() / grid.h
+    over = np.all((centre + half >= 0.0) & (centre - half <= [grid.nx - 1, grid.nz - 1]), axis=1)
+    vertical = bodies.vertical_half()
+    top = float(np.max(state.heights)) + grid.y0
+    return over & (bodies.position[:, 1] - vertical <= top + 1e-9) & (bodies.position[:, 1] + vertical >= grid.y0 - depth)
+
+
+def _previous(state: WaterState, bodies: Bodies, width: int) -> tuple[F64, I64, np.ndarray]:
+    """Each body's cross-section at t − 1 (padded to ``width``) and whether it had one."""
+    polygons = np.zeros((len(bodies), width, 2))
+    counts = np.zeros(len(bodies), np.int64)
+    known = state.body_entities
+    has = np.zeros(len(bodies), bool)
+    if len(known) and len(bodies):
+        sorter = np.argsort(known)
+        pos = np.minimum(np.searchsorted(known, bodies.entities, sorter=sorter), len(known) - 1)
+        src = sorter[pos]
+        has = known[src] == bodies.entities
+        w = min(width, state.polygons.shape[1])
+        polygons[has, :w] = state.polygons[src[has], :w]
+        counts[has] = np.minimum(state.polygon_counts[src[has]], w)
+    return polygons, counts, has
+
+
+def _carried(state: WaterState, points: AddedPoints, z: F64, zp: F64) -> tuple[F64, F64]:
+    """N_z(t), N_z(t − 1) of the added points: carried over by key from the last step, or lifted onto the
+    surface (eq. 2.2–2.4) for points that are new."""
+    heights, previous = bilinear(z, points.uv), bilinear(zp, points.uv)
+    known = state.point_keys
+    if len(known) and len(points):
+        sorter = np.argsort(known)
+        pos = np.minimum(np.searchsorted(known, points.keys, sorter=sorter), len(known) - 1)
+        src = sorter[pos]
+        same = known[src] == points.keys
+        heights[same] = state.point_heights[src[same]]
+        previous[same] = state.point_previous[src[same]]
+    return heights, previous
+
+
+def _disturb(state: WaterState, cfg: WaterSurface, grid: Grid, dt: float, rng: np.random.Generator | None) -> None:
+    """Random drops (``disturbance_rate``) and pending impact dents, as displacements without velocity."""
+    centres, heights, radius = [], [], max(cfg.disturbance_radius, grid.h)
+    if cfg.disturbance_rate > 0.0 and rng is not None:
+        n = int(rng.poisson(cfg.disturbance_rate * dt))
+        centres.append(rng.uniform((0.0, 0.0), (grid.nx - 1, grid.nz - 1), size=(n, 2)))
+        heights.append(cfg.disturbance_height * rng.uniform(0.5, 1.0, size=n))
+    if state.splashes:
+        splash = np.array(state.splashes, dtype=np.float64).reshape(-1, 3)
+        centres.append(splash[:, :2])
+        heights.append(splash[:, 2])
+        state.splashes = []
+    if centres:
+        flat, change = dents(grid, np.concatenate(centres), np.concatenate(heights), radius)
+        state.heights.ravel()[flat] += change
+        state.previous.ravel()[flat] += change
+
+
+def step_water(state: WaterState, cfg: WaterSurface, grid: Grid, bodies: Bodies, dt: float,
+               rng: np.random.Generator | None = None) -> StepReport:
+    """Advance ``state`` by one fixed step ``dt`` with ``bodies`` at their new transforms."""
+    k = courant_k(cfg.wave_speed, cfg.spacing, dt)
+    if state.degree is None or state.degree.shape != state.heights.shape:
+        state.degree = free_degree(*state.heights.shape)
+    volume = _water_mean(state.heights, np.flatnonzero(state.solid.ravel()) if state.solid.any() else None)
+    _disturb(state, cfg, grid, dt, rng)
+    z, zp = state.heights, state.previous
+    bodies = bodies.take(_near(bodies, grid, state, cfg.depth)) if len(bodies) else bodies
+    levels = plane_levels(z, state.solid, bodies, grid)
+    plane_y = grid.y0 + levels
+    sections = nudge(cross_sections(bodies, plane_y, grid, cfg.sphere_segments))
+    report = StepReport(bodies, plane_y, sections)
+    if cfg.wave_source == "outline":
+        new, new_points, points, previous_points = _outline_step(state, cfg, grid, bodies, sections, levels,
+                                                                 plane_y, k, report)
+    else:
+        new, new_points, points, previous_points = _grid_step(state, cfg, grid, bodies, plane_y, k, report)
+    # Keep the water's volume: drops, impacts, points coming and going and vertices changing between water and
+    # body move the mean level a little; shift it back (heights at t and t + 1 alike: no velocity).
+    shift = volume - _water_mean(new, report.solid if len(report.solid) else None)
+    new += shift
+    z += shift
+    new_points = new_points + shift
+    previous_points = previous_points + shift
+    if cfg.damping < 1.0:  # section 2.3.2, about the mean level of the water
+        new = volume + cfg.damping * (new - volume)
+        new_points = volume + cfg.damping * (new_points - volume)
+    state.previous, state.heights = z, new
+    state.point_keys, state.point_uv, state.point_kind = points.keys, points.uv, points.kind
+    state.point_heights, state.point_previous, state.segments = new_points, previous_points, points.segments
+    state.body_entities, state.body_positions = bodies.entities.copy(), bodies.position.copy()
+    state.body_rotations = bodies.rotation.copy()
+    state.polygons, state.polygon_counts = sections.polygons, sections.counts
+    state.last_raised = report.change
+    report.points = points
+    return report
+
+
+def _outline_step(state, cfg, grid, bodies, sections, levels, plane_y, k, report):
+    """The paper's method: added points on the outline make and reflect the waves."""
+    z, zp = state.heights, state.previous
+    points = added_points(sections, bodies.entities, grid)
+    heights, previous = _carried(state, points, z, zp)
+    prev_polygons, prev_counts, has = _previous(state, bodies, sections.polygons.shape[1])
+    change, _, raised, lowered = outline_impulse(points, sections, prev_polygons, prev_counts, has, grid,
+                                                 cfg.outline_constant)
+    solid, solid_body = solid_vertices(sections, grid)
+    state.solid = np.zeros(z.shape, bool)
+    state.solid.ravel()[solid] = True
+    fluid = ~state.solid if len(solid) else None
+    pairs = coupling_pairs(points, ~state.solid, grid)
+    new, new_points = propagate(z, zp, k, state.degree, fluid, pairs, heights, previous)
+    # eq. 2.6 / 2.7: a displacement of the point (its height history moves with it, so no velocity is injected)
+    new_points = new_points + change
+    heights = heights + change
+    if len(solid):  # inside the body: held at the plane S' (hidden under the body), no velocity
+        new.ravel()[solid] = levels[solid_body]
+        z.ravel()[solid] = levels[solid_body]
+    report.change, report.raised, report.lowered, report.solid = change, raised, lowered, solid
+    return new, new_points, points, heights
+
+
+def _grid_step(state, cfg, grid, bodies, plane_y, k, report):
+    """The older method (figure 3.4): the change of submerged depth displaces the vertices under the body."""
+    z, zp = state.heights, state.previous
+    column = np.zeros(z.shape)
+    flat, depth = column_depths(bodies, plane_y, grid)
+    column.ravel()[flat] = depth
+    before = state.column_depth if state.column_depth is not None else np.zeros(z.shape)
+    change = cfg.outline_constant * (column - before)
+    z += change  # a displacement (with z(t − 1), so no velocity is injected)
+    zp += change
+    state.column_depth = column
+    state.solid = np.zeros(z.shape, bool)
+    new, _ = propagate(z, zp, k, state.degree)
+    report.column_change = change
+    empty = AddedPoints(np.zeros((0, 2)), np.zeros(0, np.int8), np.zeros(0, np.int64), np.zeros(0, np.int64),
+                        np.zeros((0, 2), np.int64))
+    return new, np.zeros(0), empty, np.zeros(0)

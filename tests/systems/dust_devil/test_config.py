@@ -1,0 +1,78 @@
+"""DustDevil config: presets and the showcase validate; mistakes give errors that name the key."""
+
+from pathlib import Path
+
+import pytest
+
+from components.dust_devil import DustDevilConfig
+from engine.cli import validate_file
+from engine.config import ConfigError, validate
+from engine.registry import default_registry
+
+ROOT = Path(__file__).resolve().parents[3]
+PRESETS = sorted((ROOT / "configs/effects/dust_devil").glob("*.toml"))
+SHOWCASE = ROOT / "configs/scenes/dust_devil_showcase.toml"
+
+
+@pytest.fixture(scope="module")
+def registry():
+    return default_registry()
+
+
+def test_the_three_presets_exist():
+    assert {p.stem for p in PRESETS} >= {"paper", "small_whirl", "large_storm"}
+
+
+@pytest.mark.parametrize("path", PRESETS, ids=lambda p: p.stem)
+def test_preset_validates_and_has_schema_header(path, registry):
+    assert path.read_text(encoding="utf-8").startswith("#:schema ../../schema/DustDevil.schema.json")
+    validate_file(path, registry)
+
+
+def test_showcase_scene_validates(registry):
+    validate_file(SHOWCASE, registry)
+
+
+def test_paper_preset_is_the_papers_setup():
+    import tomllib
+
+    data = tomllib.loads((ROOT / "configs/effects/dust_devil/paper.toml").read_text(encoding="utf-8"))
+    cfg = DustDevilConfig.model_validate(data)
+    assert 3500 <= cfg.particle_count <= 5000
+    assert (cfg.sub_particles, cfg.repeats, cfg.lookup) == (2, 16, "nearest")
+
+
+def _error(data: dict) -> str:
+    with pytest.raises(ConfigError) as info:
+        validate(DustDevilConfig, data, "devil.toml")
+    return str(info.value)
+
+
+def test_wrong_type_names_the_key():
+    text = _error({"particle_count": "5000"})
+    assert "particle_count" in text and "devil.toml" in text
+
+
+def test_out_of_range_names_the_key():
+    assert "repeats" in _error({"repeats": 0})
+    assert "grid_resolution[1]" in _error({"grid_resolution": [32, 1000, 32]})
+    assert "particle_count" in _error({"particle_count": 10_000_000})
+
+
+def test_unknown_key_suggests_the_near_miss():
+    text = _error({"sub_particle": 2})
+    assert "unknown key 'sub_particle'" in text and "did you mean 'sub_particles'" in text
+
+
+def test_bad_lookup_mode_suggests():
+    text = _error({"lookup": "nearst"})
+    assert "lookup" in text and "nearest" in text
+
+
+def test_angle_range_must_be_ordered():
+    assert "rotation_angle_range" in _error({"rotation_angle_range": [30.0, 10.0]})
+
+
+def test_drag_repeats_cannot_exceed_repeats():
+    text = _error({"repeats": 4, "drag_repeats": 8})
+    assert "drag_repeats: Value error, must not exceed repeats (4)" in text

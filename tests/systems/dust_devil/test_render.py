@@ -1,0 +1,161 @@
+"""Dust devil rendering (headless EGL): PBVR statistics (2.3), R while dragging, presets and golden images."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from engine.app import App
+from tests.render_utils import assert_golden, make_renderer, render_app
+from tests.systems.dust_devil.helpers import devil, scene_text
+
+ROOT = Path(__file__).resolve().parents[3]
+
+CAMERA = """
+[[entities]]
+name = "{name}"
+[entities.components.Transform]
+[entities.components.Camera]
+projection = "{projection}"
+controller = "{controller}"
+target = [0.0, {target_y}, 0.0]
+distance = {distance}
+yaw = 20.0
+pitch = {pitch}
+ortho_height = {ortho}
+far = 400.0
+viewport = {viewport}
+priority = {priority}
+"""
+
+
+def camera(name="oblique", projection="perspective", controller="orbit", target_y=8.0, distance=40.0,
+           pitch=-12.0, ortho=40.0, viewport=(0.0, 0.0, 1.0, 1.0), priority=0) -> str:
+    return CAMERA.format(name=name, projection=projection, controller=controller, target_y=target_y,
+                         distance=distance, pitch=pitch, ortho=ortho, viewport=list(viewport), priority=priority)
+
+
+def app_for(tmp_path, name="scene", cameras=None, **kw) -> App:
+    path = tmp_path / f"{name}.toml"
+    path.write_text(scene_text(**kw) + (camera() if cameras is None else cameras), encoding="utf-8")
+    return App(path, strict=True, configs_root=ROOT / "configs")
+
+
+def hdr_frames(app, frames: int, width=96, height=72) -> np.ndarray:
+    """(frames, h, w) luminance of the first view's HDR colour after the dust devil's passes, without stepping
+    the simulation: every frame draws a new PBVR ensemble of the same particles."""
+    renderer = make_renderer(app, width, height)
+    out = []
+    try:
+        for _ in range(frames):
+            renderer.extract(app.world)
+            graph = renderer.declare()
+            view = renderer.views[0]
+
+            def setup(b):
+                b.read(view.color)
+
+            def execute(pc):
+                raw = np.frombuffer(pc.get(view.color).read(), np.float16).astype(np.float64)
+                out.append(raw.reshape(view.height, view.width, 4)[..., :3].mean(axis=-1))
+
+            graph.add_pass("test.read_hdr", setup, execute, side_effect=True)
+            graph.execute()
+            renderer.frame_index += 1
+    finally:
+        renderer.release()
+        app.renderer = None
+    return np.array(out)
+
+
+def test_pbvr_mean_matches_single_pass_and_variance_falls_as_1_over_r(tmp_path, gl_ctx):
+    stats = {}
+    for repeats in (1, 4, 16):
+        app = app_for(tmp_path, name=f"r{repeats}", cameras=camera(target_y=3.0, distance=14.0, pitch=-8.0),
+                      terrain=False, position=(0.0, 0.0, 0.0), particle_count=300, prewarm_time=3.0,
+                      repeats=repeats, drag_repeats=1, show_markers=False, point_size=1.0,
+                      sub_particle_radius=0.8, grid_resolution=[16, 16, 16])
+        app.step(1)
+        frames = hdr_frames(app, 24)
+        stats[repeats] = (frames.mean(axis=0), frames.var(axis=0, ddof=1))
+    mean1, var1 = stats[1]
+    region = var1 > 1e-4  # pixels the dust reaches
+    assert region.sum() > 150
+    contrast = np.abs(mean1[region] - np.median(mean1)).mean()
+    for r in (4, 16):
+        mean_r, var_r = stats[r]
+        # the mean of the R-repeat image is the single-pass expectation (within sampling error)
+        assert abs(mean_r[region].mean() - mean1[region].mean()) < 0.05 * contrast + 2e-3
+        ratio = var1[region].mean() / var_r[region].mean()
+        assert 0.6 * r < ratio < 1.6 * r, (r, ratio)
+
+
+def _pass_names(app, width=80, height=60) -> list[str]:
+    renderer = make_renderer(app, width, height)
+    try:
+        renderer.extract(app.world)
+        return list(renderer.declare().compile().order)
+    finally:
+        renderer.release()
+        app.renderer = None
+
+
+def test_repeats_drop_while_dragging_and_real_particles_hidden(tmp_path, gl_ctx):
+    app = app_for(tmp_path, particle_count=300, prewarm_time=0.0, repeats=12, drag_repeats=3)
+    app.step(1)
+    entity, *_ = devil(app)
+    names = _pass_names(app)
+    assert sum(f"dust_devil.{entity}.pbvr_repeat" in n for n in names) == 12
+    assert not any(".points." in n for n in names)  # PBVR on: the real particles are not drawn
+    assert f"dust_devil.{entity}.pbvr_resolve.view0" in names
+    app.registry.command("dust_devil.drag")(app.world, entity, delta=(1.0, 0.0, 0.0))
+    app.step(1)
+    assert sum(f"dust_devil.{entity}.pbvr_repeat" in n for n in _pass_names(app)) == 3
+    app.step(2)
+    assert sum(f"dust_devil.{entity}.pbvr_repeat" in n for n in _pass_names(app)) == 12
+
+    plain = app_for(tmp_path, name="plain", particle_count=300, prewarm_time=0.0, pbvr=False)
+    plain.step(1)
+    names = _pass_names(plain)
+    assert any(".points." in n for n in names) and not any("pbvr" in n for n in names)
+
+
+@pytest.mark.parametrize("preset", ["paper", "small_whirl", "large_storm"])
+def test_preset_renders(tmp_path, gl_ctx, preset):
+    """Each preset draws visible dust: the image differs from the same scene without the dust devil's dust."""
+    import tomllib
+
+    size = tomllib.loads((ROOT / f"configs/effects/dust_devil/{preset}.toml").read_text())["field_size"]
+    cams = camera(target_y=0.35 * size[1], distance=1.6 * size[1], pitch=-10.0)
+    images = []
+    for count in (None, 1):
+        extra = {} if count is None else {"particle_count": count}
+        app = app_for(tmp_path, name=f"{preset}{count}", cameras=cams, terrain=True, amplitude=2.0,
+                      position=(0.0, -2.0, 0.0), preset=f"dust_devil/{preset}", prewarm_time=1.5,
+                      show_markers=False, **extra)
+        images.append(np.asarray(render_app(app, 120, 90, frames=1), np.float64))
+    diff = np.abs(images[0] - images[1]).max(axis=-1)
+    assert (diff > 12).sum() > 60, f"{preset}: dust covers only {(diff > 12).sum()} pixels"
+
+
+def test_golden_showcase_both_views(gl_ctx):
+    app = App(ROOT / "configs/scenes/dust_devil_showcase.toml")
+    image = render_app(app, 200, 75, frames=1)
+    assert_golden(image, "dust_devil_showcase")
+
+
+def test_golden_top_and_oblique_close_up(tmp_path, gl_ctx):
+    cams = (camera(name="top", projection="orthographic", controller="top", distance=60.0, ortho=30.0,
+                   viewport=(0.0, 0.0, 0.5, 1.0), priority=1)
+            + camera(name="oblique", viewport=(0.5, 0.0, 0.5, 1.0), distance=34.0, target_y=9.0))
+    app = app_for(tmp_path, cameras=cams, preset="dust_devil/paper", amplitude=3.0, position=(0.0, -3.0, 0.0),
+                  marker_radius=0.8)
+    assert_golden(render_app(app, 200, 100, frames=1), "dust_devil_views")
+
+
+def test_rendering_does_not_change_the_simulation(tmp_path, gl_ctx):
+    plain = app_for(tmp_path, name="a", particle_count=300, prewarm_time=0.5)
+    drawn = app_for(tmp_path, name="b", particle_count=300, prewarm_time=0.5)
+    plain.step(4)
+    render_app(drawn, 64, 48, frames=4)
+    assert plain.state_hash() == drawn.state_hash()

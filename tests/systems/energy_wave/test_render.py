@@ -1,0 +1,124 @@
+"""Headless rendering of the energy wave: golden images, every preset draws, GPU expansion of M and N sprites."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from engine.app import App
+from systems.energy_wave.extract import extract_frame, pack_emitter
+from tests.render_utils import assert_golden, render_app
+
+from .helpers import add_box, add_emitter, make_app
+
+ROOT = Path(__file__).resolve().parents[3]
+PRESETS = sorted(p.stem for p in (ROOT / "configs" / "effects" / "energy_wave").glob("*.toml"))
+
+SCENE = """
+[scene]
+seed = 5
+plugins = ["render", "energy_wave"]
+[render]
+sky_top = [0.02, 0.03, 0.08]
+sky_horizon = [0.06, 0.07, 0.12]
+[[entities]]
+name = "camera"
+[entities.components.Transform]
+[entities.components.Camera]
+controller = "orbit"
+target = [0.0, 1.0, -0.8]
+distance = 3.2
+yaw = 30.0
+pitch = -10.0
+[[entities]]
+name = "wall"
+[entities.components.Transform]
+position = [0.0, 1.0, -1.15]
+scale = [3.0, 2.2, 0.3]
+[entities.components.Collider]
+shape = "box"
+[entities.components.Mesh]
+shape = "box"
+color = [0.3, 0.3, 0.34]
+[[entities]]
+name = "emitter"
+[entities.components.Transform]
+position = [0.0, 1.0, 1.2]
+[entities.components.EnergyWaveEmitter]
+preset = "energy_wave/{preset}"
+{extra}
+"""
+
+
+def scene_app(tmp_path, preset: str, extra: str = "") -> App:
+    path = ROOT / "configs" / "scenes" / f"_test_energy_wave_{tmp_path.name}.toml"
+    path.write_text(SCENE.format(preset=preset, extra=extra), encoding="utf-8")
+    try:
+        return App(path)
+    finally:
+        path.unlink()
+
+
+def _render(tmp_path, preset, steps=70, size=(160, 120), extra=""):
+    app = scene_app(tmp_path, preset, extra)
+    app.step(steps)
+    return np.asarray(render_app(app, width=size[0], height=size[1], frames=1), np.float32), app
+
+
+@pytest.mark.parametrize("preset", ["reference", "pattern_c", "pattern_g"])
+def test_golden_images(tmp_path, preset):
+    app = scene_app(tmp_path, preset)
+    app.step(70)
+    image = render_app(app, width=160, height=120, frames=1)
+    assert_golden(image, f"energy_wave_{preset}")
+
+
+def test_every_preset_renders_a_visible_wave(tmp_path):
+    dark, _ = _render(tmp_path, "reference", steps=1, size=(64, 48), extra="emitting = false")
+    for preset in PRESETS:
+        image, _ = _render(tmp_path, preset, steps=60, size=(64, 48))
+        glow = image.mean(axis=2) - dark.mean(axis=2)
+        assert (glow > 60).sum() > 20, preset  # plenty of pixels much brighter than the empty scene
+        assert image.max() > 200, preset
+
+
+def test_glow_pass_adds_a_halo(tmp_path):
+    plain, _ = _render(tmp_path, "reference", size=(96, 72), extra="glow = 0.0")
+    glowing, _ = _render(tmp_path, "reference", size=(96, 72), extra="glow = 2.0")
+    assert glowing.mean() > plain.mean() + 2.0
+
+
+def test_occluded_particles_are_hidden(tmp_path):
+    """A box filling the view in front of the camera hides the whole wave, glow included (depth test)."""
+    blocker = """
+[[entities]]
+name = "blocker"
+[entities.components.Transform]
+position = [1.36, 1.47, 1.57]
+scale = [3.0, 3.0, 0.1]
+[entities.components.Mesh]
+shape = "box"
+color = [0.2, 0.2, 0.2]
+"""
+    visible, _ = _render(tmp_path, "reference", size=(64, 48))
+    no_wave, _ = _render(tmp_path, "reference", size=(64, 48), extra="emitting = false")
+    hidden, _ = _render(tmp_path, "reference", size=(64, 48), extra=blocker)
+    blocker_only, _ = _render(tmp_path, "reference", size=(64, 48), extra="emitting = false\n" + blocker)
+    assert np.abs(visible - no_wave).max() > 100  # without the blocker the wave shows
+    assert np.abs(hidden - blocker_only).max() <= 2  # behind it, nothing of the wave reaches the image
+
+
+def test_cpu_records_do_not_grow_with_m_or_n():
+    sizes = []
+    for samples in (1, 5, 64):
+        app = make_app(8)
+        add_box(app, (0.0, 0.0, -1.2), (2.0, 2.0, 0.2))
+        entity, cfg, st = add_emitter(app, splash_samples=samples, trail_textures=samples, continuity_probability=0.5)
+        app.step(50)
+        records, counts = pack_emitter(cfg, st)
+        assert records.shape == (st.particles.count, 12) and sum(counts) == st.particles.count
+        frame = extract_frame(app.world)
+        single, trail, bar = counts
+        assert frame.sprites() == single + samples * (trail + bar)
+        sizes.append(records.nbytes / st.particles.count)
+    assert sizes[0] == sizes[1] == sizes[2]  # one record per particle whatever M and N

@@ -1,0 +1,80 @@
+"""Presets, the showcase scene and config errors (wrong type, out of range, unknown key, inconsistent values)."""
+
+from __future__ import annotations
+
+import pytest
+
+from engine.cli import validate_file
+from engine.config import ConfigError
+from engine.registry import default_registry
+from engine.scene import plan_scene
+from tests.systems.grass_field.helpers import PRESETS, SHOWCASE, scene_text, write_scene
+
+PRESET_NAMES = ["paper", "lawn", "meadow"]
+
+
+@pytest.fixture(scope="module")
+def registry():
+    return default_registry()
+
+
+@pytest.mark.parametrize("name", PRESET_NAMES)
+def test_preset_validates(name, registry):
+    path = PRESETS / f"{name}.toml"
+    assert path.read_text().splitlines()[0] == "#:schema ../../schema/GrassField.schema.json"
+    validate_file(path, registry)
+
+
+def test_paper_preset_is_the_papers_setup(registry):
+    from tests.systems.grass_field.helpers import make_field, paper_config
+
+    cfg = paper_config()
+    assert cfg.cell_size == 100.0 and cfg.merge_distance == 800.0
+    assert cfg.level_thresholds == (4.0, 1.5, 1.0, 0.75) and cfg.length_of_interest == 0.5
+    _, data = make_field(cfg)
+    assert 15.0 <= data.plant_height <= 25.0  # "plants about 20 tall"
+
+
+def test_showcase_validates(registry):
+    validate_file(SHOWCASE, registry)
+
+
+def _problems(tmp_path, registry, body: str):
+    path = write_scene(tmp_path, scene_text(body, terrain=False))
+    with pytest.raises(ConfigError) as info:
+        plan_scene(path, registry)
+    return info.value.problems
+
+
+@pytest.mark.parametrize("body, key, words", [
+    ('grid_x = "10"', "GrassField.grid_x", "integer"),
+    ("plants_per_cell = 0", "GrassField.plants_per_cell", "greater than or equal to 1"),
+    ("cell_size = 1e9", "GrassField.cell_size", "less than or equal"),
+    ("level_thresholds = [0.75, 1.0, 1.5, 4.0]", "GrassField.level_thresholds", "strictly decreasing"),
+    ("leaf_subdivisions = [4.0, 2.0, 1.0]", "GrassField.leaf_subdivisions", "at least 4"),
+    ("max_level = 6", "GrassField.max_level", "less than or equal to 5"),
+])
+def test_bad_values_name_the_key(tmp_path, registry, body, key, words):
+    problems = _problems(tmp_path, registry, body)
+    assert len(problems) == 1
+    assert problems[0].key.endswith(key), problems[0]
+    assert words in str(problems[0])
+
+
+def test_unknown_key_suggests_the_near_miss(tmp_path, registry):
+    problems = _problems(tmp_path, registry, "plants_per_cel = 10")
+    assert problems[0].key.endswith("GrassField.plants_per_cel")
+    assert problems[0].suggestion == "plants_per_cell"
+    assert "did you mean 'plants_per_cell'" in str(problems[0])
+
+
+def test_plant_budget_is_enforced(tmp_path, registry):
+    problems = _problems(tmp_path, registry, "grid_x = 256\ngrid_z = 256\nplants_per_cell = 64")
+    assert "grid_x * grid_z * plants_per_cell" in str(problems[0])
+
+
+def test_preset_value_overridden_inline(tmp_path, registry):
+    path = write_scene(tmp_path, scene_text('preset = "grass_field/paper"\ngrid_x = 3\ngrid_z = 2', terrain=False))
+    plan = plan_scene(path, registry)
+    cfg = dict(plan.entities[0].components)["GrassField"]
+    assert (cfg.grid_x, cfg.grid_z, cfg.cell_size) == (3, 2, 100.0)

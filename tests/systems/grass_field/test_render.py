@@ -1,0 +1,125 @@
+"""Headless rendering: golden images near and far, the LOD cache (bakes counted, disk cache), the band,
+the debug view, the presets, and that rendering leaves the simulation state alone."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from components.grass_field import GrassFieldState
+from engine.app import App
+from tests.render_utils import assert_golden, make_renderer, render_app
+from tests.systems.grass_field.helpers import scene_text, write_scene
+
+SMALL = 'preset = "grass_field/paper"\nplants_per_cell = 16\ncell_variants = 3\nplant_variants = 4\n'
+
+
+def _camera(position, yaw=0.0, pitch=-8.0, far=4000.0) -> str:
+    return (f"[entities.components.Transform]\nposition = {list(position)}\nrotation = [{yaw}, {pitch}, 0.0]\n"
+            f'[entities.components.Camera]\ncontroller = "none"\nfov = 50.0\nnear = 0.5\nfar = {far}\n')
+
+
+def _app(tmp_path, grass: str, camera: str, terrain: bool = True, name: str = "scene.toml") -> App:
+    return App(write_scene(tmp_path, scene_text(grass, camera, terrain=terrain), name))
+
+
+def _feature(app):
+    return next(f for f in app.renderer.features if f.name == "grass_field")
+
+
+def test_golden_near(tmp_path):
+    app = _app(tmp_path, SMALL + "grid_x = 6\ngrid_z = 6\n", _camera((0.0, 28.0, 120.0), pitch=-10.0))
+    image = render_app(app, 160, 120, frames=1)
+    assert_golden(image, "grass_field_near")
+
+
+def test_golden_far(tmp_path):
+    app = _app(tmp_path, SMALL + "grid_x = 24\ngrid_z = 24\n", _camera((0.0, 60.0, 1150.0), pitch=-4.0))
+    image = render_app(app, 160, 120, frames=1)
+    assert_golden(image, "grass_field_far")
+
+
+def test_lod_cache_bakes_each_view_once_and_reuses_it(tmp_path):
+    grass = SMALL + f"grid_x = 16\ngrid_z = 16\ndisk_cache = true\ncache_dir = '{tmp_path / 'cache'}'\n"
+    camera = _camera((0.0, 40.0, 700.0), pitch=-5.0)
+    app = _app(tmp_path, grass, camera)
+    renderer = make_renderer(app, 96, 72)
+    try:
+        app.step(1)
+        app.render_frame()
+        gpu = next(iter(_feature(app).fields.values()))
+        assert gpu.baked_views == 3 * 12  # every view of every cell layout, once
+        assert gpu.atlas is not None and gpu.layout.tiles == 36
+        plan = next(iter(_feature(app).plans.values()))
+        assert len(plan.impostor_cells) > 0
+        for _ in range(3):
+            app.step(1)
+            app.render_frame()
+        assert gpu.baked_views == 36  # reused across frames
+        assert gpu.draw_calls <= 8  # instanced: a handful of draw calls, not one per cell or plant
+        assert gpu.disk_path is not None and gpu.disk_path.is_file()
+    finally:
+        renderer.release()
+        app.renderer = None
+    again = _app(tmp_path, grass, camera, name="again.toml")
+    renderer = make_renderer(again, 96, 72)
+    try:
+        again.step(1)
+        again.render_frame()
+        gpu = next(iter(_feature(again).fields.values()))
+        assert gpu.loaded_from_disk and gpu.baked_views == 0  # a restart skips baking
+    finally:
+        renderer.release()
+        again.renderer = None
+
+
+def test_band_is_baked_and_drawn_beyond_the_distance(tmp_path):
+    app = _app(tmp_path, SMALL + "grid_x = 24\ngrid_z = 24\nband_cache_cells = 2\n",
+               _camera((0.0, 40.0, 0.0), pitch=-3.0))
+    renderer = make_renderer(app, 96, 72)
+    try:
+        app.step(1)
+        app.render_frame()
+        feature = _feature(app)
+        plan = next(iter(feature.plans.values()))
+        gpu = next(iter(feature.fields.values()))
+        assert (plan.levels == 5).sum() > 50 and plan.primitives[5] > 0
+        assert 1 <= gpu.band_bakes <= 2 and len(gpu.band_entries) <= 2
+        bakes = gpu.band_bakes
+        app.render_frame()
+        assert gpu.band_bakes == bakes  # the viewer's cell did not change: no new bake
+    finally:
+        renderer.release()
+        app.renderer = None
+
+
+def test_debug_view_colours_cells_by_level(tmp_path):
+    grass = SMALL + "grid_x = 12\ngrid_z = 12\n"
+    camera = _camera((0.0, 30.0, 560.0), pitch=-6.0)
+    plain = np.asarray(render_app(_app(tmp_path, grass, camera), 120, 90), np.int16)
+    debug = np.asarray(render_app(_app(tmp_path, grass + "debug_levels = true\n", camera, name="d.toml"), 120, 90),
+                       np.int16)
+    saturation = lambda img: (img.max(axis=2) - img.min(axis=2))  # noqa: E731
+    assert (saturation(debug) > 90).mean() > 3 * max((saturation(plain) > 90).mean(), 1e-3)
+
+
+@pytest.mark.parametrize("preset, height, cell", [("paper", 30.0, 100.0), ("lawn", 0.25, 1.0),
+                                                   ("meadow", 2.2, 4.0)])
+def test_presets_render(tmp_path, preset, height, cell):
+    grass = f'preset = "grass_field/{preset}"\ngrid_x = 4\ngrid_z = 4\ncell_variants = 2\n'
+    camera = _camera((0.0, height, 2.0 * cell), pitch=-12.0, far=50.0 * cell)
+    image = np.asarray(render_app(_app(tmp_path, grass, camera, terrain=False), 96, 72), np.int16)
+    sky = np.asarray(render_app(_app(tmp_path, "grid_x = 1\ngrid_z = 1\nplants_per_cell = 1\ncell_size = 0.001\n",
+                                     camera, terrain=False, name="sky.toml"), 96, 72), np.int16)
+    covered = np.abs(image - sky).max(axis=2) > 30
+    assert covered.mean() > 0.05, f"{preset}: grass covers only {covered.mean():.1%} of the image"
+
+
+def test_rendering_leaves_the_state_alone(tmp_path):
+    grass = SMALL + "grid_x = 8\ngrid_z = 8\n"
+    camera = _camera((0.0, 30.0, 300.0))
+    drawn, plain = _app(tmp_path, grass, camera), _app(tmp_path, grass, camera, name="b.toml")
+    render_app(drawn, 64, 48, frames=3)
+    plain.step(3)
+    assert drawn.state_hash() == plain.state_hash()
+    assert drawn.world.single(GrassFieldState).placed is not None

@@ -1,0 +1,84 @@
+"""Headless rendering: the toon-ramp isosurface and the outline pass in the render graph (seeds/002 §3.5)."""
+
+import numpy as np
+import pytest
+
+from systems.toon_smoke.render import ramp_texels
+from tests.render_utils import assert_golden, make_renderer, render_app
+from tests.systems.toon_smoke.helpers import make_app, preset, scene_text
+
+STEPS = {"paper": 90, "chimney": 60, "explosion": 20}
+CAMERA = {"paper": (0.3, 5.0), "chimney": (-0.5, 7.0), "explosion": (-0.4, 6.0)}
+
+
+def preset_app(tmp_path, name, extra=""):
+    target_y, distance = CAMERA[name]
+    text = scene_text(name, extra=extra).replace("target = [0.0, 0.2, 0.0]", f"target = [0.0, {target_y}, 0.0]")
+    return make_app(tmp_path, text.replace("distance = 6.5", f"distance = {distance}"))
+
+
+def _close(image: np.ndarray, colour) -> np.ndarray:
+    target = np.round(np.clip(np.asarray(colour), 0, 1) * 255)
+    return np.all(np.abs(image.astype(int) - target) <= 3, axis=-1)
+
+
+def test_ramp_texture_has_hard_bands():
+    texels = ramp_texels([(1, 1, 1), (0.5, 0.5, 0.5), (0.1, 0.2, 0.3)], [0.0, 0.25, 0.5], texels=8)
+    assert np.allclose(texels[:2], 1.0) and np.allclose(texels[2:4], 0.5) and np.allclose(texels[4:], (0.1, 0.2, 0.3))
+
+
+def test_golden_paper_setup(tmp_path):
+    """The paper's setup (figure 4): cel-shaded smoke around the red sphere, outlined."""
+    image = render_app(preset_app(tmp_path, "paper"), 160, 120, frames=1, steps_per_frame=STEPS["paper"])
+    pixels = np.asarray(image)
+    cfg = preset("paper")
+    on_ramp = sum(_close(pixels, c).sum() for c in cfg.ramp_colors)
+    assert on_ramp > 300, "the smoke should be drawn in the flat ramp colours"
+    assert _close(pixels, cfg.outline_color).sum() > 50, "the outline should be drawn"
+    assert_golden(image, "toon_smoke_paper")
+
+
+@pytest.mark.parametrize("name", ["chimney", "explosion"])
+def test_presets_render_headless(tmp_path, name):
+    image = np.asarray(render_app(preset_app(tmp_path, name), 120, 90, frames=1, steps_per_frame=STEPS[name]))
+    cfg = preset(name)
+    assert sum(_close(image, c).sum() for c in cfg.ramp_colors) > 150
+    assert _close(image, cfg.outline_color).sum() > 30
+
+
+def test_outline_pass_is_in_the_graph_and_draws_the_silhouette(tmp_path):
+    app = preset_app(tmp_path, "paper")
+    app.step(STEPS["paper"])
+    renderer = make_renderer(app, 160, 120)
+    try:
+        app.render_frame()
+        with_outline = np.asarray(renderer.read_image()).astype(int)
+        dot = renderer.graph.to_dot()
+        assert "toon_smoke.surface.view0" in dot and "toon_smoke.outline.view0" in dot
+        assert "toon_smoke.edges.view0" in dot
+    finally:
+        renderer.release()
+        app.renderer = None
+    # the same frame without outlines differs only along the silhouette
+    from components.toon_smoke import ToonSmokeState, ToonSmokeVolumeConfig
+
+    _, (cfg, _) = app.world.query(ToonSmokeVolumeConfig, ToonSmokeState)[0]
+    cfg.outline_width = 0.0
+    renderer = make_renderer(app, 160, 120)
+    try:
+        app.render_frame()
+        without = np.asarray(renderer.read_image()).astype(int)
+        assert "toon_smoke.outline.view0" not in renderer.graph.to_dot()
+    finally:
+        renderer.release()
+        app.renderer = None
+    changed = np.abs(with_outline - without).max(axis=-1) > 0
+    assert 30 < changed.sum() < 0.2 * changed.size
+
+
+def test_rendering_does_not_change_the_state_hash(tmp_path):
+    plain = make_app(tmp_path, scene_text("explosion"))
+    plain.step(6)
+    drawn = make_app(tmp_path, scene_text("explosion"))
+    render_app(drawn, 64, 48, frames=2, steps_per_frame=3)
+    assert drawn.state_hash() == plain.state_hash()
