@@ -14,6 +14,7 @@ the GPU; the beam is kept short so nearly every particle is a splash particle. T
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import tempfile
 import time
@@ -126,7 +127,7 @@ def bench_case(particles: int, textures_each: int, frames: int, width: int, heig
             app.render_frame()
         renderer.ctx.finish()
     sim = extract = draw = 0.0
-    counts, sprites = [], []
+    counts, sprites, frame_times = [], [], []
     from systems.energy_wave.extract import extract_frame
 
     start = time.perf_counter()
@@ -141,13 +142,36 @@ def bench_case(particles: int, textures_each: int, frames: int, width: int, heig
             renderer.ctx.finish()
         t3 = time.perf_counter()
         sim, extract, draw = sim + t1 - t0, extract + t2 - t1, draw + t3 - t2
+        frame_times.append(t3 - t0)
         counts.append(live(app))
         sprites.append(data.sprites())
     total = time.perf_counter() - start
     if renderer is not None:
         renderer.release()
     return dict(particles=float(np.mean(counts)), sprites=float(np.mean(sprites)), sim_ms=sim / frames * 1e3,
-                extract_ms=extract / frames * 1e3, draw_ms=draw / frames * 1e3, fps=frames / total)
+                extract_ms=extract / frames * 1e3, draw_ms=draw / frames * 1e3, fps=frames / total,
+                median_fps=1.0 / float(np.median(frame_times)))
+
+
+def energy_wave_pass_times(width: int, height: int, frames: int) -> str:
+    """Per-pass times of case 4 (CPU wall time with glFinish after each pass): what the energy wave itself costs."""
+    from engine.render.frontend import headless_renderer
+
+    app = make_app(scene_text(2410, 5, width, height))
+    app.step(60)
+    renderer = headless_renderer(app, width, height)
+    for _ in range(3):
+        app.step(1)
+        app.render_frame()
+    renderer.timer.enabled, renderer.timer.gpu = True, False
+    renderer.timer.totals.clear()
+    renderer.timer.frames = 0
+    for _ in range(frames):
+        app.step(1)
+        app.render_frame()
+    report = renderer.timer.report()
+    renderer.release()
+    return "case 4, " + report
 
 
 def bench_step(particles: int, steps: int) -> dict:
@@ -175,15 +199,18 @@ def main(argv: list[str] | None = None) -> int:
     render = not args.skip_render
     print(f"Table 4.3 (seeds/000), {args.width}x{args.height} headless, {args.frames} frames per case, one fixed "
           f"step per frame")
+    print(f"load average before: {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores (others' work slows the timings)")
     print(f"{'case':>4} {'particles':>10} {'textures':>9} {'sim ms':>7} {'extract':>8} {'draw ms':>8} "
-          f"{'fps here':>9} {'paper fps':>10}")
+          f"{'fps here':>9} {'(median)':>9} {'paper fps':>10}")
     for i, (particles, textures, paper_fps) in enumerate(PAPER, start=1):
         r = bench_case(particles, textures // particles, args.frames, args.width, args.height, render)
-        fps = f"{r['fps']:9.1f}" if render else f"{'-':>9}"
+        fps = f"{r['fps']:9.1f} {r['median_fps']:9.1f}" if render else f"{'-':>9} {'-':>9}"
         print(f"{i:>4} {r['particles']:10.0f} {r['sprites']:9.0f} {r['sim_ms']:7.2f} {r['extract_ms']:8.2f} "
               f"{r['draw_ms']:8.2f} {fps} {paper_fps:10.1f}", flush=True)
-    print("('draw ms' is the renderer's whole frame: its own extraction, every pass, tone mapping, glFinish;"
-          " 'textures' counts the sprites expanded on the GPU)")
+    print("('draw ms' is the renderer's whole frame: its own extraction, every pass of every feature, tone mapping,"
+          " glFinish;\n 'textures' counts the sprites expanded on the GPU; 'extract' is the energy wave's own packing)")
+    if render:
+        print(energy_wave_pass_times(args.width, args.height, args.frames // 4 + 1))
     print()
     print("simulation step alone (numpy), continuous emission, beams of 10k particles each:")
     for particles in (10_000, 100_000):

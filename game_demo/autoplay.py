@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from engine.input import InputEvent, InputQueue
-from engine.render.components import Camera, orthographic, perspective, view_matrix
+from engine.render.components import Camera, camera_matrices
 from engine.spatial import Transform
 from game_demo.scripts.common import GameState, Target, find_named_world
 
@@ -151,18 +151,10 @@ class AutoPilot:
 
     def _to_pixels(self, world, camera_entity: int, point) -> tuple[float, float] | None:
         """Window pixel (origin bottom-left) of a world point seen by a camera, or None when outside."""
-        cam = world.get(camera_entity, Camera)
-        t = world.get(camera_entity, Transform)
-        cfg = cam.config
-        w, h = self.window
-        vx, vy, vw, vh = cfg.viewport
-        pw, ph = vw * w, vh * h
-        if cfg.projection == "orthographic":
-            proj = orthographic(cfg.ortho_height, pw / ph, cfg.near, cfg.far)
-        else:
-            proj = perspective(math.radians(cfg.fov), pw / ph, cfg.near, cfg.far)
-        clip = proj @ view_matrix(t) @ np.array([point[0], point[1], point[2], 1.0])
+        view, proj, (x, y, pw, ph) = camera_matrices(world.get(camera_entity, Camera),
+                                                      world.get(camera_entity, Transform), self.window)
+        clip = proj @ view @ np.array([point[0], point[1], point[2], 1.0])
         ndc = clip[:3] / clip[3]
         if np.any(np.abs(ndc[:2]) > 0.98):
             return None
-        return (vx * w + (ndc[0] + 1.0) / 2.0 * pw, vy * h + (ndc[1] + 1.0) / 2.0 * ph)
+        return (x + (ndc[0] + 1.0) / 2.0 * pw, y + (ndc[1] + 1.0) / 2.0 * ph)

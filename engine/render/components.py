@@ -74,20 +74,45 @@ def _place(cam: Camera, t: Transform) -> None:
     t.position = cam.target + back * cam.distance
 
 
+def _inside(rect, point) -> bool:
+    x, y, w, h = rect
+    return x <= point[0] <= x + w and y <= point[1] <= y + h
+
+
 def camera_controllers(world: World, dt: float) -> None:
-    """Input stage: move cameras from this tick's input (right mouse drag looks; wheel zooms)."""
+    """Input stage: move cameras from this tick's input.
+
+    A right-button drag turns the camera in whose viewport the press started (the highest-priority one
+    there); the wheel zooms the orbit camera under the cursor.
+    """
     inp = world.resource(InputState)
-    for _, (cam, t) in world.query(Camera, Transform):
+    cams = [(e, cam, t) for e, (cam, t) in world.query(Camera, Transform) if cam.config.enabled]
+    window = window_size(world)
+    under = None
+    for e, cam, _ in sorted(cams, key=lambda c: (-c[1].config.priority, c[0])):
+        if _inside(viewport_pixels(cam.config.viewport, window), inp.mouse):
+            under = e
+            break
+    if inp.was_pressed("mouse_right"):
+        cam_state = world.try_resource(CameraInput)
+        if cam_state is None:
+            cam_state = CameraInput()
+            world.insert_resource(cam_state, state=True)
+        cam_state.dragging = under
+    drag = world.try_resource(CameraInput)
+    dragging = drag.dragging if drag is not None and inp.is_down("mouse_right") else None
+    for entity, cam, t in cams:
         cfg = cam.config
-        if cfg.controller == "none" or not cfg.enabled:
+        if cfg.controller == "none":
             continue
-        looking = inp.is_down("mouse_right")
+        looking = dragging == entity
         dx, dy = inp.mouse_delta
         if looking and cfg.controller in ("orbit", "fly"):
             cam.yaw = (cam.yaw - dx * cfg.look_sensitivity) % 360.0
             cam.pitch = float(np.clip(cam.pitch + dy * cfg.look_sensitivity, -89.0, 89.0))
         if cfg.controller == "orbit":
-            cam.distance = float(np.clip(cam.distance * (0.9 ** inp.scroll), cfg.near * 4, cfg.far * 0.5))
+            if inp.scroll and under == entity:
+                cam.distance = float(np.clip(cam.distance * (0.9 ** inp.scroll), cfg.near * 4, cfg.far * 0.5))
             _place(cam, t)
         elif cfg.controller == "top":
             _place(cam, t)
@@ -97,6 +122,13 @@ def camera_controllers(world: World, dt: float) -> None:
                              inp.is_down("s") - inp.is_down("w")], float)
             if move.any():
                 t.position = t.position + quat_rotate(t.rotation, move / np.linalg.norm(move)) * cfg.move_speed * dt
+
+
+@dataclass
+class CameraInput:
+    """Which camera a right-button drag started on (state: it decides what later ticks turn)."""
+
+    dragging: int | None = None
 
 
 # ------------------------------------------------------------------------ matrices
@@ -145,15 +177,38 @@ def look_at(eye, target, up=(0.0, 1.0, 0.0)) -> np.ndarray:
     return m
 
 
-def screen_ray(view: np.ndarray, proj: np.ndarray, ndc_xy) -> tuple[np.ndarray, np.ndarray]:
-    """World-space ray (origin, unit direction) through normalised device coordinates ``ndc_xy``."""
-    inv = np.linalg.inv(proj @ view)
-    x, y = ndc_xy
-    near = inv @ np.array([x, y, -1.0, 1.0])
-    far = inv @ np.array([x, y, 1.0, 1.0])
-    near, far = near[:3] / near[3], far[:3] / far[3]
-    d = far - near
-    return near, d / np.linalg.norm(d)
+def viewport_pixels(viewport, window: tuple[int, int]) -> tuple[int, int, int, int]:
+    """(x, y, width, height) in whole pixels (origin bottom-left) of a viewport given as window fractions."""
+    vx, vy, vw, vh = (float(a) for a in viewport)
+    w, h = window
+    return (int(round(vx * w)), int(round(vy * h)), max(1, int(round(vw * w))), max(1, int(round(vh * h))))
+
+
+def projection(cfg: CameraConfig, width: int, height: int) -> np.ndarray:
+    """The camera's projection for a viewport of ``width`` x ``height`` pixels."""
+    aspect = width / height
+    if cfg.projection == "perspective":
+        return perspective(math.radians(cfg.fov), aspect, cfg.near, cfg.far)
+    return orthographic(cfg.ortho_height, aspect, cfg.near, cfg.far)
+
+
+def camera_matrices(cam: Camera, t: Transform, window: tuple[int, int]):
+    """(view, proj, viewport pixels) exactly as the renderer builds them: for picking and projecting."""
+    rect = viewport_pixels(cam.config.viewport, window)
+    return view_matrix(t), projection(cam.config, rect[2], rect[3]), rect
+
+
+def window_size(world: World) -> tuple[int, int]:
+    """The window (or offscreen target) size in pixels: the renderer's when attached, else the scene's."""
+    from engine.app import App
+
+    app = world.try_resource(App)
+    if app is None:
+        return 960, 540
+    renderer = app.renderer
+    if renderer is not None:
+        return renderer.width, renderer.height
+    return app.config.render.width, app.config.render.height
 
 
 # --------------------------------------------------------------------------- meshes

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 import moderngl
 import numpy as np
 
-from engine.render.components import Camera, Hud, look_at, orthographic, perspective, view_matrix
+from engine.render.components import Camera, Hud, look_at, projection, view_matrix, viewport_pixels
 from engine.render.feature import OPAQUE, OVERLAY, TRANSPARENT, RenderFeature, View
 from engine.render.graph import RenderGraph, ResourcePool, TextureDesc
 from engine.spatial import Transform
@@ -162,7 +162,9 @@ class Renderer:
     def _make_resource(self, desc: TextureDesc) -> moderngl.Texture:
         size = (desc.width, desc.height)
         if desc.is_depth:
-            return self.ctx.depth_texture(size)
+            depth = self.ctx.depth_texture(size)
+            depth.compare_func = ""  # sampled as plain depth by passes that read it (soft particles, PBVR)
+            return depth
         tex = self.ctx.texture(size, desc.components, dtype=desc.dtype)
         tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
         tex.repeat_x = tex.repeat_y = False
@@ -211,20 +213,13 @@ class Renderer:
 
     def _view_for(self, name: str, cam: Camera, view: np.ndarray, pos, fwd, entity: int, main: bool) -> View:
         cfg = cam.config
-        vx, vy, vw, vh = cfg.viewport
-        w = max(1, int(round(vw * self.width)))
-        h = max(1, int(round(vh * self.height)))
-        aspect = w / h
-        if cfg.projection == "perspective":
-            proj = perspective(np.radians(cfg.fov), aspect, cfg.near, cfg.far)
-            fov = float(np.radians(cfg.fov))
-        else:
-            proj = orthographic(cfg.ortho_height, aspect, cfg.near, cfg.far)
-            fov = 0.0
-        v = View(name, w, h, view.astype(np.float32), proj.astype(np.float32), np.asarray(pos, np.float32),
+        rect = viewport_pixels(cfg.viewport, (self.width, self.height))
+        proj = projection(cfg, rect[2], rect[3])
+        fov = float(np.radians(cfg.fov)) if cfg.projection == "perspective" else 0.0
+        v = View(name, rect[2], rect[3], view.astype(np.float32), proj.astype(np.float32), np.asarray(pos, np.float32),
                  np.asarray(fwd, np.float32), cfg.near, cfg.far, fov, cfg.projection == "orthographic",
                  is_main=main, camera_entity=entity)
-        v.extra["rect"] = (int(round(vx * self.width)), int(round(vy * self.height)), w, h)
+        v.extra["rect"] = rect
         v.extra["border"] = tuple(cfg.border_color)
         return v
 

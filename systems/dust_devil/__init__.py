@@ -61,17 +61,10 @@ def _find_camera(world, name: str):
 
 
 def window_size(world) -> tuple[int, int]:
-    """The window (or offscreen target) size in pixels: the renderer's if attached, else the scene's."""
-    from engine.app import App
+    """The window (or offscreen target) size in pixels (engine.render.components.window_size)."""
+    from engine.render.components import window_size as engine_window_size
 
-    app = world.try_resource(App)
-    if app is None:
-        return 960, 540
-    renderer = getattr(app, "renderer", None)
-    w, h = getattr(renderer, "width", None), getattr(renderer, "height", None)
-    if isinstance(w, int) and isinstance(h, int):
-        return w, h
-    return app.config.render.width, app.config.render.height
+    return engine_window_size(world)
 
 
 def _target(world, entity, target):
@@ -98,30 +91,31 @@ def screen_pick(world, camera_name: str, points: Any) -> tuple[np.ndarray, np.nd
 
 
 # ------------------------------------------------------------------------------------------------ commands
-def drag_command(world, entity, delta, target=None) -> np.ndarray:
-    """``dust_devil.drag``: move the field box (and all its particles) by a world-space ``delta``."""
+def drag_command(world, entity, delta, target=None, interactive=False) -> np.ndarray:
+    """``dust_devil.drag``: move the field box (and all its particles) by a world-space ``delta``.
+    ``interactive=True`` counts as a user's drag (PBVR drops to ``drag_repeats`` for the next frame)."""
     _, transform, state = _target(world, entity, target)
-    return simulate.drag(state, transform, delta, world.tick)
+    return simulate.drag(state, transform, delta, world.tick, bool(interactive))
 
 
-def pick_drag_command(world, entity, start, end, target=None) -> np.ndarray:
+def pick_drag_command(world, entity, start, end, target=None, interactive=False) -> np.ndarray:
     """``dust_devil.pick_drag``: move by the horizontal difference of two ground pick points."""
     delta = np.asarray(end, dtype=np.float64) - np.asarray(start, dtype=np.float64)
     if delta.shape != (3,):
         raise DragError(f"pick_drag start and end must be world points (x, y, z), got {start!r}, {end!r}")
     delta[1] = 0.0
-    return drag_command(world, entity, delta, target)
+    return drag_command(world, entity, delta, target, interactive)
 
 
-def screen_drag_command(world, entity, start, end, camera=None, target=None) -> np.ndarray:
+def screen_drag_command(world, entity, start, end, camera=None, target=None, interactive=True) -> np.ndarray:
     """``dust_devil.screen_drag``: a mouse drag from pixel ``start`` to ``end`` in a camera's viewport (default:
-    the dust devil's ``drag_camera``), picked on the ground."""
+    the dust devil's ``drag_camera``), picked on the ground; interactive (like the mouse) unless told not."""
     devil, _, _ = _target(world, entity, target)
     name = camera or world.get(devil, DustDevilConfig).drag_camera
     hit, points = screen_pick(world, name, [start, end])
     if not hit.all():
         raise DragError(f"screen_drag {start} -> {end} does not hit the ground inside camera '{name}'s viewport")
-    return pick_drag_command(world, entity, points[0], points[1], devil)
+    return pick_drag_command(world, entity, points[0], points[1], devil, interactive)
 
 
 # ------------------------------------------------------------------------------------------------- systems

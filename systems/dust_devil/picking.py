@@ -11,7 +11,6 @@ of ``CameraConfig.viewport``).
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -85,14 +84,8 @@ def pick_ground(view: ArrayLike, proj: ArrayLike, viewport_px: ArrayLike, points
 
 def camera_matrices(camera, transform, window: tuple[int, int]) -> tuple[F64, F64, F64]:
     """(view, proj, viewport_px) of a Camera component placed by its Transform in a window of ``window`` pixels,
-    built as the renderer builds them (engine.render.components)."""
-    from engine.render.components import orthographic, perspective, view_matrix
+    exactly as the renderer builds them (engine.render.components.camera_matrices)."""
+    from engine.render.components import camera_matrices as engine_camera_matrices
 
-    cfg = camera.config
-    vp = viewport_pixels(cfg.viewport, window)
-    aspect = vp[2] / vp[3]
-    if cfg.projection == "orthographic":
-        proj = orthographic(cfg.ortho_height, aspect, cfg.near, cfg.far)
-    else:
-        proj = perspective(math.radians(cfg.fov), aspect, cfg.near, cfg.far)
-    return view_matrix(transform), proj, vp
+    view, proj, rect = engine_camera_matrices(camera, transform, window)
+    return view, proj, np.asarray(rect, dtype=np.float64)

@@ -232,14 +232,16 @@ def step(cfg: DustDevilConfig, state: DustDevilState, transform: Transform, grou
     _advance(cfg, state, transform, ground, (emit_rng, rotate_rng), dt)
 
 
-def drag(state: DustDevilState, transform: Transform, delta: ArrayLike, tick: int) -> F64:
+def drag(state: DustDevilState, transform: Transform, delta: ArrayLike, tick: int, interactive: bool = True) -> F64:
     """Section 4: add the dragged distance to the field space's position; particles (stored in field space)
-    move with it.  Returns the new position."""
+    move with it.  ``interactive`` marks a user's drag (PBVR then uses ``drag_repeats``).  Returns the new
+    position."""
     delta = np.asarray(delta, dtype=np.float64)
     if delta.shape != (3,) or not np.all(np.isfinite(delta)):
         raise ValueError(f"drag delta must be 3 finite numbers (world x, y, z), got {delta.tolist()}")
     transform.position = transform.position + delta
-    state.last_drag_tick = int(tick)
+    if interactive:
+        state.last_drag_tick = int(tick)
     return transform.position.copy()
 
 

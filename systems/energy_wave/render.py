@@ -111,7 +111,7 @@ class EnergyWaveFeature(RenderFeature):
         self._records.write(padded.tobytes(), viewport=(0, 0, RECORDS_PER_ROW * 3, rows))
 
     # ---------------------------------------------------------------------------------------------- drawing
-    def _draw_sprites(self, view: View, data: FrameData, target_size: tuple[int, int]) -> None:
+    def _draw_sprites(self, view: View, data: FrameData) -> None:
         vao = self._sprite_vao()
         prog = vao.program
         self._records.use(0)
@@ -119,7 +119,7 @@ class EnergyWaveFeature(RenderFeature):
         view_m = view.view.astype(np.float64)
         _set(prog, records=0, gradient=1, scene_depth=2, records_per_row=RECORDS_PER_ROW,
              camera_right=tuple(map(float, view_m[0, :3])), camera_up=tuple(map(float, view_m[1, :3])),
-             target_size=(float(target_size[0]), float(target_size[1])))
+             depth_scale=float(PARTICLE_DOWNSCALE))
         prog["view_proj"].write(view.view_proj.T.astype(np.float32).tobytes())
         for emitter in data.emitters:
             cfg = emitter.config
@@ -159,13 +159,13 @@ class EnergyWaveFeature(RenderFeature):
             fbo.clear(0.0, 0.0, 0.0, 0.0)
             depth = pc.get(view.depth)
             compare = depth.compare_func
-            depth.compare_func = ""  # sample depth values, not shadow comparisons
+            depth.compare_func = ""  # read depth values, not shadow comparisons
             depth.use(2)
             ctx.disable(moderngl.DEPTH_TEST)  # depth tested against the view's depth in the shader; no writes
             ctx.enable(moderngl.BLEND)
             ctx.blend_func = moderngl.ONE, moderngl.ONE
             try:
-                self._draw_sprites(view, data, size)
+                self._draw_sprites(view, data)
             finally:
                 depth.compare_func = compare
                 ctx.blend_func = moderngl.DEFAULT_BLENDING

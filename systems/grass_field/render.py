@@ -487,11 +487,15 @@ class GrassFieldFeature(RenderFeature):
         for entity, (transform, cfg, state) in world.query(Transform, GrassFieldConfig, GrassFieldState):
             data = ensure_placed(world, transform, cfg, state)
             out.append(FieldFrame(entity, cfg, state, data, state.max_level, state.debug_levels))
+        alive = {frame.entity for frame in out}
+        for entity in [e for e in self.fields if e not in alive]:  # despawned fields
+            self.fields.pop(entity).release()
         return out
 
     def gpu(self, frame: FieldFrame) -> FieldGpu:
+        """The field's GL resources; rebuilt only when what it draws changed (not for a restored copy)."""
         gpu = self.fields.get(frame.entity)
-        if gpu is None or gpu.data is not frame.data or gpu.cfg is not frame.cfg:
+        if gpu is None or gpu.data.key != frame.data.key:
             if gpu is not None:
                 gpu.release()
             gpu = FieldGpu(self.renderer, frame.cfg, frame.state, frame.data)

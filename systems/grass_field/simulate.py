@@ -8,6 +8,8 @@ is a cache of the state (``GrassFieldState.placed``, not hashed).
 
 from __future__ import annotations
 
+import hashlib
+import json
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,6 +36,7 @@ class FieldData:
     lod_points: np.ndarray  # (C, 3) the point of each cell whose distance enters eq. 1
     cell_variant: np.ndarray  # (C,) layout of each cell
     cell_turn: np.ndarray  # (C,) quarter turns of each cell
+    key: str = ""  # digest of everything above: equal keys draw the same (survives snapshot / restore copies)
 
     @property
     def cell_count(self) -> int:
@@ -71,9 +74,20 @@ def field_data(cfg: GrassFieldConfig, state: GrassFieldState, origin: np.ndarray
     reach, tallest = reach * grow, tallest * grow
     half_diag = cfg.cell_size * np.sqrt(0.5)
     lod_points = placed.cell_centre + np.array([0.0, 0.5 * tallest, 0.0])
+    key = _digest(cfg, state, placed)
     return FieldData(placed, meshes, cell_primitives(placed.plant_variant, cfg.plants_per_cell, meshes),
                      reach, tallest, float(half_diag + reach), lod_points, state.cell_variant.copy(),
-                     state.cell_turn.copy())
+                     state.cell_turn.copy(), key)
+
+
+def _digest(cfg: GrassFieldConfig, state: GrassFieldState, placed: PlacedField) -> str:
+    """SHA-256 of the config's canonical JSON, the random draws and the placed plants."""
+    h = hashlib.sha256(json.dumps(cfg.model_dump(mode="json", warnings=False), sort_keys=True).encode())
+    for arr in (state.variant_branch_count, state.variant_segments, state.variant_base_length, state.variant_tilt,
+                state.variant_azimuth, state.layout_offset, state.layout_yaw, state.layout_variant,
+                state.layout_scale, state.layout_tint, state.cell_variant, state.cell_turn, placed.plant_position):
+        h.update(np.ascontiguousarray(arr).tobytes())
+    return h.hexdigest()
 
 
 def ensure_placed(world: World, transform: Transform, cfg: GrassFieldConfig, state: GrassFieldState) -> FieldData:

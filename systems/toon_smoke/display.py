@@ -43,64 +43,71 @@ def splat_blobs(target: F32, centres: NDArray[np.float64], directions: NDArray[n
     and ``across`` the semi-axes in cells.  Each blob adds amplitude·(1 − q²)³ where
     q² = (d·û)²/a² + (|d|² − (d·û)²)/b² < 1 (a smooth, compactly supported bump).  Particles are grouped by the
     stencil radius they need (⌈a⌉ cells, at most a handful of groups), each group is evaluated as one
-    (particles × stencil) array (two small matrix products, see :func:`_splat_group`) and scattered with an unbuffered ``np.add.at`` (sequential in index order, so the
-    sum repeats bit for bit).  Returns the number of blobs added.
+    (particles × stencil) array (two small matrix products, see :func:`_splat_group`) and scattered with an
+    unbuffered ``np.add.at`` (sequential in index order, so the sum repeats bit for bit) into a copy of the grid
+    padded by the largest reach, so no bounds test is needed; the interior is added back at the end.  Blobs centred
+    more than one cell outside the grid are skipped (particles never are: they are reborn when they leave).
+    Returns the number of blobs added.
     """
-    m = len(centres)
-    if m == 0 or amplitude == 0.0:
+    if len(centres) == 0 or amplitude == 0.0:
         return 0
+    near = np.all((centres >= -1.0) & (centres <= np.array(target.shape)), axis=1)
+    if not near.all():
+        centres, directions, along, across = centres[near], directions[near], along[near], across[near]
+        if len(centres) == 0:
+            return 0
     reach = np.maximum(np.ceil(along).astype(np.int64), 1)
-    flat = target.reshape(-1)
+    pad = int(reach.max()) + 2
+    shape = tuple(n + 2 * pad for n in target.shape)
+    padded = np.zeros(shape, np.float32)
+    flat = padded.reshape(-1)
     for r in np.unique(reach):  # loop over stencil sizes, each vectorized over its particles
         members = np.flatnonzero(reach == r)
-        stencil = _stencil(int(r))
+        stencil = _stencil(int(r), shape)
         batch = max(1, _SPLAT_CHUNK // len(stencil[0]))
         for start in range(0, len(members), batch):
             sel = members[start:start + batch]
-            _splat_group(flat, target.shape, centres[sel], directions[sel], along[sel], across[sel], stencil,
+            _splat_group(flat, shape, centres[sel] + pad, directions[sel], along[sel], across[sel], stencil,
                          amplitude)
-    return m
+    core = tuple(slice(pad, pad + n) for n in target.shape)
+    target += padded[core]
+    return len(centres)
 
 
-_STENCILS: dict[int, tuple[NDArray[np.int32], NDArray[np.float32]]] = {}
+_STENCILS: dict[tuple, tuple[NDArray[np.intp], NDArray[np.float32]]] = {}
 
 
-def _stencil(reach: int) -> tuple[NDArray[np.int32], NDArray[np.float32]]:
-    """Integer offsets (S, 3) of the cells whose centre can lie within ``reach`` of a point rounded to a cell
-    centre, and the same offsets as float32 (3, S) for the products below."""
-    if reach not in _STENCILS:
+def _stencil(reach: int, shape: tuple[int, ...]) -> tuple[NDArray[np.intp], NDArray[np.float32]]:
+    """The cells whose centre can lie within ``reach`` of a point rounded to a cell centre: their flat index offsets
+    in a grid of ``shape`` (S,) and their (x, y, z) offsets as float32 (3, S)."""
+    key = (reach, shape)
+    if key not in _STENCILS:
         r = np.arange(-reach, reach + 1)
         offsets = np.stack(np.meshgrid(r, r, r, indexing="ij"), axis=-1).reshape(-1, 3)
-        offsets = offsets[(offsets * offsets).sum(axis=1) <= (reach + 0.87) ** 2].astype(np.int32)
-        _STENCILS[reach] = (offsets, np.ascontiguousarray(offsets.T, dtype=np.float32))
-    return _STENCILS[reach]
+        offsets = offsets[(offsets * offsets).sum(axis=1) <= (reach + 0.87) ** 2]
+        flat = (offsets[:, 0] * shape[1] + offsets[:, 1]) * shape[2] + offsets[:, 2]
+        _STENCILS[key] = (flat.astype(np.intp), np.ascontiguousarray(offsets.T, dtype=np.float32))
+    return _STENCILS[key]
 
 
 def _splat_group(flat: F32, shape: tuple[int, ...], centres, directions, along, across, stencil, amplitude) -> None:
     """One stencil size: q for every (particle, offset) pair from two (M×3)·(3×S) products, since with
     d = f + o (f the rounded cell's offset from the centre, o the stencil offset):
     d·û = f·û + o·û and |d|² = |f|² + 2 f·o + |o|²."""
-    offsets, offsets_t = stencil
-    n = np.array(shape)
+    offset_flat, offsets_t = stencil
     c = centres.astype(np.float32)
-    base = np.rint(c).astype(np.int32)
+    base = np.rint(c).astype(np.intp)
     frac = base.astype(np.float32) - c
     axis = directions.astype(np.float32)
     t = (frac * axis).sum(axis=1)[:, None] + axis @ offsets_t
     dist2 = (frac * frac).sum(axis=1)[:, None] + 2.0 * (frac @ offsets_t) + (offsets_t * offsets_t).sum(axis=0)
     inv_a2 = (1.0 / along ** 2).astype(np.float32)[:, None]
     inv_b2 = (1.0 / across ** 2).astype(np.float32)[:, None]
-    q = 1.0 - (t * t * (inv_a2 - inv_b2) + dist2 * inv_b2)
-    rows, cols = np.nonzero(q > 0.0)
-    q = q[rows, cols]
-    reach = int(np.abs(offsets).max())
-    border = np.any((base - reach < 0) | (base + reach >= n), axis=1)
-    if border.any():  # only blobs near a wall need the per-cell bounds test
-        cells = base[rows] + offsets[cols]
-        inside = np.all((cells >= 0) & (cells < n), axis=1)
-        rows, cols, q = rows[inside], cols[inside], q[inside]
-    base_flat = (base[:, 0].astype(np.intp) * shape[1] + base[:, 1]) * shape[2] + base[:, 2]
-    offset_flat = (offsets[:, 0].astype(np.intp) * shape[1] + offsets[:, 1]) * shape[2] + offsets[:, 2]
+    q = (1.0 - (t * t * (inv_a2 - inv_b2) + dist2 * inv_b2)).reshape(-1)
+    keep = np.flatnonzero(q > 0.0)
+    rows, cols = np.divmod(keep, len(offset_flat))
+    base_flat = (base[:, 0] * shape[1] + base[:, 1]) * shape[2] + base[:, 2]
+    q = q[keep]
     np.add.at(flat, base_flat[rows] + offset_flat[cols], np.float32(amplitude) * q * q * q)
 
 

@@ -60,6 +60,7 @@ class PoissonHierarchy:
 
     levels: list[Level] = field(default_factory=list)
     singular: bool = False  # no open boundary: M has the constants in its null space
+    fluid_weight: F32 | None = None  # 1 in fluid cells, 0 in solid cells (fine level)
 
 
 @dataclass
@@ -157,7 +158,7 @@ def build_hierarchy(solid: NDArray[np.bool_], open_faces: tuple[bool, ...]) -> P
         raise ValueError(f"grid {levels[0].shape} cannot be coarsened below {level.shape}: use sides that are "
                          "multiples of 8")
     level.dense_inverse = np.linalg.pinv(_dense_operator(level)) if level.active.any() else np.zeros((0, 0))
-    return PoissonHierarchy(levels, singular=not any(open_faces))
+    return PoissonHierarchy(levels, singular=not any(open_faces), fluid_weight=(~solid).astype(np.float32))
 
 
 def _neighbour_sum(level: Level, phi: F32) -> F32:
@@ -215,7 +216,8 @@ def v_cycle(hierarchy: PoissonHierarchy, b: F32, depth: int = 0) -> F32:
     if level.dense_inverse is not None:
         x = np.zeros_like(b)
         cells = level.active
-        x[cells] = (level.dense_inverse @ b[cells].astype(np.float64)).astype(np.float32)
+        # multiply-and-sum rather than BLAS matvec: numpy's pairwise sum gives the same bits on every CPU
+        x[cells] = (level.dense_inverse * b[cells].astype(np.float64)[None, :]).sum(axis=1).astype(np.float32)
         return x
     x = level.red_inv_diag * b  # the first red half sweep from φ = 0 needs no neighbours
     x = _smooth(level, x, b, ("black",))

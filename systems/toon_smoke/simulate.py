@@ -1,14 +1,19 @@
-"""The ToonSmokeVolume step (seeds/002, figure 1), one phase per function so the benchmark can time each:
+"""The ToonSmokeVolume step (seeds/002, figure 1), one phase per function (:data:`PHASES`, which the benchmark
+times one by one):
 
 1. :func:`update_obstacles` — solid cells from the volume's own sphere and other colliders;
-2. :func:`fluid_step` — stable fluids on the simulation grid (§3.1);
-3. :func:`display_step` — upsample to the display grid (§3.2), particles and blobs (§3.3), noise (§3.4);
+2. :func:`velocity_step`, :func:`projection_step`, :func:`scalar_step` — stable fluids on the simulation grid (§3.1);
+3. :func:`upsample_step`, :func:`advect_particles`, :func:`blob_step`, :func:`noise_step` — the display grid
+   (§3.2), particles and blobs (§3.3), noise (§3.4);
 4. :func:`mesh_step` — the isosurface at D_iso (§3.5), re-meshed every step.
 
 Systems: ``toon_smoke.simulate`` (phases 1–3, simulation stage) and ``toon_smoke.mesh`` (phase 4, post-simulation).
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -148,10 +153,10 @@ def impose_velocity(geo: Geometry, state: ToonSmokeState, centre, radius: float,
         np.copyto(comp, np.float32(velocity[axis]), where=inside)
 
 
-def fluid_step(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, dt: float, up_local: np.ndarray,
-               rng: np.random.Generator | None = None) -> None:
-    """One stable-fluids step (Stam 1999): advect u, add forces and sources, diffuse, project; then advect,
-    diffuse and fade ρ and T with the divergence-free velocity."""
+def velocity_step(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, dt: float, up_local: np.ndarray,
+                  rng: np.random.Generator | None = None) -> None:
+    """Stam 1999 up to the projection: self-advect u, add buoyancy (β·T − α·ρ along up) and vorticity
+    confinement, impose the sources, diffuse (ν), and zero the normal velocity on walls and solids."""
     geo = _geometry(cfg, state)
     h = geo.h
     u, v, w = fluid.advect_velocity(geo, state.u, state.v, state.w, dt)
@@ -167,25 +172,42 @@ def fluid_step(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, dt: float, up_
         state.u, state.v, state.w = (fluid.diffuse(c, cfg.viscosity, dt, h, cfg.diffusion_iterations)
                                      for c in (state.u, state.v, state.w))
     fluid.enforce_solid_faces(state.u, state.v, state.w, state.hierarchy)
+
+
+def projection_step(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState) -> None:
+    """The pressure projection (MGPCG), with the puffs' and blasts' divergence sources; records the divergence
+    before and after."""
     target = state.expansion if state.expansion.any() else None
     state.pressure, state.divergence_before, state.divergence_after, state.pressure_iterations_used = fluid.project(
-        state.u, state.v, state.w, h, state.hierarchy, state.pressure, cfg.pressure_tolerance,
-        cfg.pressure_iterations, target)
+        state.u, state.v, state.w, _geometry(cfg, state).h, state.hierarchy, state.pressure,
+        cfg.pressure_tolerance, cfg.pressure_iterations, target)
     if target is not None:
         state.expansion = np.zeros_like(state.expansion)
+
+
+def scalar_step(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, dt: float) -> None:
+    """Advect ρ and T with the divergence-free velocity, diffuse (κ), fade, clear solids, clamp to the limits."""
+    geo = _geometry(cfg, state)
     density, temperature = fluid.advect_scalars(geo, [state.density, state.temperature], state.u, state.v,
                                                 state.w, dt)
     if cfg.diffusion > 0.0:
-        density = fluid.diffuse(density, cfg.diffusion, dt, h, cfg.diffusion_iterations)
-        temperature = fluid.diffuse(temperature, cfg.diffusion, dt, h, cfg.diffusion_iterations)
+        density = fluid.diffuse(density, cfg.diffusion, dt, geo.h, cfg.diffusion_iterations)
+        temperature = fluid.diffuse(temperature, cfg.diffusion, dt, geo.h, cfg.diffusion_iterations)
     if cfg.density_dissipation > 0.0:
         density *= np.float32(1.0 / (1.0 + cfg.density_dissipation * dt))
     if cfg.temperature_cooling > 0.0:
         temperature *= np.float32(1.0 / (1.0 + cfg.temperature_cooling * dt))
-    density[state.solid] = 0.0
-    temperature[state.solid] = 0.0
-    state.density = np.clip(density, 0.0, cfg.density_limit).astype(np.float32, copy=False)
-    state.temperature = np.clip(temperature, 0.0, cfg.temperature_limit).astype(np.float32, copy=False)
+    fluid_cells = state.hierarchy.fluid_weight if state.hierarchy is not None else np.float32(1.0)
+    state.density = np.minimum(density * fluid_cells, np.float32(cfg.density_limit))
+    state.temperature = np.minimum(temperature * fluid_cells, np.float32(cfg.temperature_limit))
+
+
+def fluid_step(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, dt: float, up_local: np.ndarray,
+               rng: np.random.Generator | None = None) -> None:
+    """One stable-fluids step (Stam 1999; seeds/002 §3.1): velocity, projection, scalars."""
+    velocity_step(cfg, state, dt, up_local, rng)
+    projection_step(cfg, state)
+    scalar_step(cfg, state, dt)
 
 
 # ------------------------------------------------------------------------------------------------ particles
@@ -223,7 +245,8 @@ def advect_particles(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, dt: floa
         state.particle_velocity = np.zeros((0, 3))
         return
     mid = p + 0.5 * dt * particle_velocity(geo, state, p)
-    p = p + dt * particle_velocity(geo, state, mid)
+    velocity = particle_velocity(geo, state, mid)
+    p = p + dt * velocity
     state.particle_age += dt
     half = 0.5 * np.asarray(cfg.extent, float)
     reborn = np.any(np.abs(p) > half, axis=1)
@@ -235,8 +258,9 @@ def advect_particles(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, dt: floa
     if count:
         p[reborn] = spawn_positions(cfg, state, rng, count)
         state.particle_age[reborn] = 0.0
+        velocity[reborn] = particle_velocity(geo, state, p[reborn])
     state.particles = p
-    state.particle_velocity = particle_velocity(geo, state, p)
+    state.particle_velocity = velocity  # the midpoint velocity stretches the blobs (figure 2)
 
 
 def _nearest(mask: np.ndarray, cells: np.ndarray) -> np.ndarray:
@@ -245,15 +269,29 @@ def _nearest(mask: np.ndarray, cells: np.ndarray) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------------------------------ display
+def upsample_step(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState) -> None:
+    """§3.2: copy the simulation density onto the display grid (trilinear upsampling)."""
+    state.display_density = upsample_linear(state.density, _geometry(cfg, state).factor)
+
+
+def blob_step(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState) -> None:
+    """§3.3: particles where the display density exceeds D_p add their blobs."""
+    state.blob_count = add_particle_blobs(cfg, state, state.display_density)
+
+
+def noise_step(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState) -> None:
+    """§3.4: multiply by the Perlin noise factor, clear solid cells, clamp to the density limit."""
+    display = state.display_density
+    display *= _masked_noise(cfg, state, _geometry(cfg, state))
+    np.minimum(display, np.float32(cfg.density_limit), out=display)  # every term is ≥ 0 already
+
+
 def display_step(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, dt: float, rng: np.random.Generator) -> None:
     """Display density = noise × (upsampled ρ + particle blobs), clamped to [0, density_limit] (§3.2–3.4)."""
-    geo = _geometry(cfg, state)
-    display = upsample_linear(state.density, geo.factor)
+    upsample_step(cfg, state)
     advect_particles(cfg, state, dt, rng)
-    state.blob_count = add_particle_blobs(cfg, state, display)
-    display *= _masked_noise(cfg, state, geo)
-    np.minimum(display, np.float32(cfg.density_limit), out=display)  # every term is ≥ 0 already
-    state.display_density = display
+    blob_step(cfg, state)
+    noise_step(cfg, state)
 
 
 def _masked_noise(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, geo: Geometry) -> np.ndarray:
@@ -305,13 +343,42 @@ def mesh_step(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState) -> None:
 
 
 # ---------------------------------------------------------------------------------------------- the systems
+@dataclass
+class StepContext:
+    """Everything one phase of one volume's step may use."""
+
+    world: World | None
+    entity: int
+    transform: Transform
+    cfg: ToonSmokeVolumeConfig
+    state: ToonSmokeState
+    dt: float
+    rng: np.random.Generator
+
+
+def _up_local(ctx: StepContext) -> np.ndarray:
+    return quat_rotate(quat_conjugate(ctx.transform.rotation), _UP)
+
+
+# The phases of one step, in order (seeds/002 figure 1); the benchmark times each one.
+PHASES: tuple[tuple[str, Callable[[StepContext], None]], ...] = (
+    ("obstacles", lambda c: update_obstacles(c.world, c.entity, c.transform, c.cfg, c.state)),
+    ("velocity (advect, forces, sources)", lambda c: velocity_step(c.cfg, c.state, c.dt, _up_local(c), c.rng)),
+    ("pressure projection (MGPCG)", lambda c: projection_step(c.cfg, c.state)),
+    ("density + temperature", lambda c: scalar_step(c.cfg, c.state, c.dt)),
+    ("upsample to display grid", lambda c: upsample_step(c.cfg, c.state)),
+    ("particles", lambda c: advect_particles(c.cfg, c.state, c.dt, c.rng)),
+    ("density blobs", lambda c: blob_step(c.cfg, c.state)),
+    ("noise", lambda c: noise_step(c.cfg, c.state)),
+)
+
+
 def step_volume(world: World | None, entity: int, transform: Transform, cfg: ToonSmokeVolumeConfig,
                 state: ToonSmokeState, dt: float, rng: np.random.Generator) -> None:
-    """Phases 1–3 for one volume and one step of ``dt`` seconds."""
-    update_obstacles(world, entity, transform, cfg, state)
-    up_local = quat_rotate(quat_conjugate(transform.rotation), _UP)
-    fluid_step(cfg, state, dt, up_local, rng)
-    display_step(cfg, state, dt, rng)
+    """Every phase of :data:`PHASES` for one volume and one step of ``dt`` seconds."""
+    ctx = StepContext(world, entity, transform, cfg, state, dt, rng)
+    for _, phase in PHASES:  # loop over the phases of the step
+        phase(ctx)
     state.time += dt
     state.steps += 1
 

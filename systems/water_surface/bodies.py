@@ -181,38 +181,44 @@ def integrate(bodies: BodyArrays, dt: float, water: tuple | None, linear_drag: f
 
 
 def pool_contacts(bodies: BodyArrays, grid: Grid, floor: float, active: np.ndarray) -> None:
-    """Impulses and push-out against the pool's floor (y ≥ floor) and walls, for the ``active`` bodies."""
+    """Impulses and push-out against the pool's floor (y ≥ floor) and walls, for the ``active`` bodies.
+
+    Per body and plane, the penetrating corners (a sphere's support point) act as one contact at their centroid:
+    a normal impulse with restitution and a Coulomb friction impulse there, then the body is pushed out by the
+    deepest penetration.
+    """
     if not active.any():
         return
     rot = quat_to_matrix(bodies.rotation)
-    normals = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0]])
+    normals = _PLANE_NORMALS
     x_hi, z_hi = grid.x0 + (grid.nx - 1) * grid.h, grid.z0 + (grid.nz - 1) * grid.h
     offsets = np.array([floor, grid.x0, -x_hi, grid.z0, -z_hi])
     corners = np.einsum("bij,bcj->bci", rot, _CORNERS[None] * bodies.half[:, None, :])  # (B, 8, 3)
     support = -bodies.radius[:, None, None] * normals[None, :, :]  # (B, P, 3) sphere
     r = np.where((bodies.shapes == SPHERE)[:, None, None, None], support[:, :, None, :],
                  corners[:, None, :, :])  # (B, P, 8, 3) offsets from the centre
-    p = bodies.position[:, None, None, :] + r
-    depth = offsets[None, :, None] - np.einsum("bpci,pi->bpc", p, normals)
-    vc = bodies.velocity[:, None, None, :] + np.cross(bodies.spin[:, None, None, :], r)
-    n = normals[None, :, None, :]
+    depth = offsets[None, :, None] - np.einsum("bpci,pi->bpc", bodies.position[:, None, None, :] + r, normals)
+    touching = (depth > 0.0) & active[:, None, None]  # (B, P, 8)
+    count = touching.sum(axis=2)
+    if not count.any():
+        return
+    arm = np.sum(np.where(touching[..., None], r, 0.0), axis=2) / np.maximum(count, 1)[..., None]  # (B, P, 3)
+    n = normals[None, :, :]
+    vc = bodies.velocity[:, None, :] + np.cross(bodies.spin[:, None, :], arm)
     vn = np.sum(vc * n, axis=-1)
-    touching = (depth > 0.0) & active[:, None, None]
-    hit = touching & (vn < 0.0)
+    hit = (count > 0) & (vn < 0.0)
     inv = _world_inverse_inertia(rot, inertia(bodies))
-    rn = np.cross(r, n)
-    k = 1.0 / bodies.mass[:, None, None] + np.sum(np.cross(np.einsum("bij,bpcj->bpci", inv, rn), r) * n, axis=-1)
-    jn = np.where(hit, -(1.0 + bodies.restitution[:, None, None]) * vn / k, 0.0)
+    k = 1.0 / bodies.mass[:, None] + np.sum(np.cross(np.einsum("bij,bpj->bpi", inv, np.cross(arm, n)), arm) * n, -1)
+    jn = np.where(hit, -(1.0 + bodies.restitution[:, None]) * vn / k, 0.0)
     vt = vc - vn[..., None] * n
     speed = np.linalg.norm(vt, axis=-1)
-    jt = np.minimum(bodies.friction[:, None, None] * jn, speed / k)
+    jt = np.minimum(bodies.friction[:, None] * jn, speed / k)
     tangent = vt / np.where(speed > 0.0, speed, 1.0)[..., None]
-    impulse = jn[..., None] * n - jt[..., None] * tangent
-    count = np.maximum(hit.sum(axis=(1, 2)), 1)[:, None]
-    total = impulse.sum(axis=(1, 2)) / count
-    angular = np.cross(r, impulse).sum(axis=(1, 2)) / count
-    bodies.velocity += total / bodies.mass[:, None]
-    bodies.spin += np.einsum("bij,bj->bi", inv, angular)
+    impulse = jn[..., None] * n - jt[..., None] * tangent  # (B, P, 3)
+    bodies.velocity += impulse.sum(axis=1) / bodies.mass[:, None]
+    bodies.spin += np.einsum("bij,bj->bi", inv, np.cross(arm, impulse).sum(axis=1))
     push = np.max(np.where(touching, depth, 0.0), axis=2)  # (B, P)
     bodies.position = bodies.position + np.einsum("bp,pi->bi", push, normals)
 
+
+_PLANE_NORMALS = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0]])

@@ -3,7 +3,7 @@
 The body displaces the grid vertices under it: each vertex column's submerged body depth b (the length of the
 vertical line through the vertex that lies inside the body and below the water plane S') is tracked, and the
 water height of the column changes by α·(b(t) − b(t−1)), as in Müller's height-field coupling. Waves therefore
-start from the grid vertices under the body rather than at its outline. b is averaged over 4 × 4 samples of the
+start from the grid vertices under the body rather than at its outline. b is averaged over 6 × 6 samples of the
 vertex's own square so that it changes smoothly as a body glides over the grid.
 """
 
@@ -15,7 +15,7 @@ from systems.water_surface.geometry import BOX, F64, I64, Bodies, Grid, ranges
 
 __all__ = ["column_depths"]
 
-_SAMPLES = 4
+_SAMPLES = 6
 
 
 def column_depths(bodies: Bodies, plane_y: F64, grid: Grid) -> tuple[I64, F64]:

@@ -49,7 +49,7 @@ def _shared_faces() -> np.ndarray:
 
 _SHARED_FACE = _shared_faces()
 _MAX_BOX_VERTICES = 6  # a plane cuts a box in at most a hexagon
-_ON_OUTLINE = 1e-6  # grid units: this close to the outline counts as on it (inside) in eq. 2.6 / 2.7
+_ON_OUTLINE = 3.0 * NUDGE  # grid units: this close to the outline counts as on it in eq. 2.6 / 2.7 (> the nudge)
 
 
 @dataclass

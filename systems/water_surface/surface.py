@@ -192,7 +192,11 @@ def _grid_step(state, cfg, grid, bodies, plane_y, k, report):
     column = np.zeros(z.shape)
     flat, depth = column_depths(bodies, plane_y, grid)
     column.ravel()[flat] = depth
-    before = state.column_depth if state.column_depth is not None else np.zeros(z.shape)
+    before = state.column_depth.copy() if state.column_depth is not None else np.zeros(z.shape)
+    new_body = ~np.isin(bodies.entities, state.body_entities)
+    if new_body.any():  # a body that just appeared has no earlier depth: it starts making waves once it moves
+        flat, depth = column_depths(bodies.take(new_body), plane_y[new_body], grid)
+        before.ravel()[flat] += depth
     change = cfg.outline_constant * (column - before)
     z += change  # a displacement (with z(t − 1), so no velocity is injected)
     zp += change

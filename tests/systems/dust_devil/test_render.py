@@ -108,7 +108,7 @@ def test_repeats_drop_while_dragging_and_real_particles_hidden(tmp_path, gl_ctx)
     assert sum(f"dust_devil.{entity}.pbvr_repeat" in n for n in names) == 12
     assert not any(".points." in n for n in names)  # PBVR on: the real particles are not drawn
     assert f"dust_devil.{entity}.pbvr_resolve.view0" in names
-    app.registry.command("dust_devil.drag")(app.world, entity, delta=(1.0, 0.0, 0.0))
+    app.registry.command("dust_devil.drag")(app.world, entity, delta=(1.0, 0.0, 0.0), interactive=True)
     app.step(1)
     assert sum(f"dust_devil.{entity}.pbvr_repeat" in n for n in _pass_names(app)) == 3
     app.step(2)

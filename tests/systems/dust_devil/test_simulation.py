@@ -100,7 +100,11 @@ def test_drag_moves_the_field_and_every_particle_by_exactly_the_delta(tmp_path):
     world_before = simulate.world_positions(state, t)
     markers_before = simulate.marker_points(cfg, t)
     delta = np.array([3.25, 0.5, -7.0])
-    ScriptContext(app.world, entity, "test").call("dust_devil.drag", delta=delta)  # as a script does
+    ctx = ScriptContext(app.world, entity, "test")
+    ctx.call("dust_devil.drag", delta=delta)  # as a script does: a programmatic move
+    assert not state.dragging(app.world.tick + 1)  # only a user's (interactive) drag lowers R
+    ctx.call("dust_devil.drag", delta=-delta)
+    ctx.call("dust_devil.drag", delta=delta, interactive=True)
     np.testing.assert_array_equal(state.positions, local_before)  # field space is untouched
     np.testing.assert_allclose(simulate.world_positions(state, t) - world_before, np.broadcast_to(delta, (400, 3)),
                                rtol=0, atol=1e-12)

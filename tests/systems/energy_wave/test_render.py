@@ -122,3 +122,69 @@ def test_cpu_records_do_not_grow_with_m_or_n():
         assert frame.sprites() == single + samples * (trail + bar)
         sizes.append(records.nbytes / st.particles.count)
     assert sizes[0] == sizes[1] == sizes[2]  # one record per particle whatever M and N
+
+
+def _expand_on_gpu(mode, sprites, records, roundness=0.5, spacing=0.4, size=1.0, trail_end=0.4):
+    """Run particles.vert with transform feedback: the world-space corners of every sprite it expands.
+
+    With view_proj = identity and the camera axes = world x and y, corner k of sprite j is centre ± size."""
+    import moderngl
+
+    from systems.energy_wave.render import RECORDS_PER_ROW, SHADERS
+    from tests.render_utils import gl_context
+
+    ctx = gl_context()
+    prog = ctx.program(vertex_shader=(SHADERS / "particles.vert").read_text(), varyings=["gl_Position"])
+    quad = ctx.buffer(np.array([-1, -1, 1, -1, -1, 1, 1, 1], np.float32).tobytes())
+    data = np.zeros((RECORDS_PER_ROW, 12), np.float32)
+    data[: len(records)] = records
+    tex = ctx.texture((RECORDS_PER_ROW * 3, 1), 4, data.tobytes(), dtype="f4")
+    tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+    tex.use(0)
+    values = dict(records=0, records_per_row=RECORDS_PER_ROW, camera_right=(1.0, 0.0, 0.0),
+                  camera_up=(0.0, 1.0, 0.0), first=0, sprites=sprites, mode=mode, size=size,
+                  spacing=spacing * size, roundness=roundness, trail_end=trail_end)
+    for name, value in values.items():
+        if name in prog:
+            prog[name].value = value
+    prog["view_proj"].write(np.eye(4, dtype=np.float32).tobytes())
+    vao = ctx.vertex_array(prog, [(quad, "2f", "in_corner")])
+    out = ctx.buffer(reserve=len(records) * sprites * 4 * 16)
+    fbo = ctx.simple_framebuffer((1, 1))  # a draw, even with rasterization off, needs a complete framebuffer
+    fbo.use()
+    vao.transform(out, mode=moderngl.POINTS, vertices=4, instances=len(records) * sprites)
+    corners = np.frombuffer(out.read(), np.float32).reshape(len(records), sprites, 4, 4)[..., :3]
+    for obj in (vao, out, fbo, tex, quad, prog):
+        obj.release()
+    return corners.mean(axis=2), (corners[:, :, 3, 0] - corners[:, :, 0, 0]) / 2.0  # centres, sizes
+
+
+def _record(position, hit=(0.0, 0.0, 0.0), direction=(1.0, 0.0, 0.0), alpha=1.0):
+    return np.array([*position, alpha, *hit, 0.0, *direction, 0.0], np.float32)
+
+
+def test_gpu_bars_follow_eq_3_8_and_tips_eq_3_9():
+    from systems.energy_wave.simulate import bar_offsets, bar_sizes
+
+    q = np.array([1.0, 2.0, 3.0])
+    d = np.array([0.0, 0.6, 0.8])
+    for n, t in [(12, 1.0), (12, 0.1), (24, 0.01), (5, 0.5)]:
+        centres, sizes = _expand_on_gpu(2, n, [_record(q, direction=d)], roundness=t, spacing=0.4, size=0.5)
+        expected = q + bar_offsets(n, 0.4 * 0.5)[:, None] * d
+        np.testing.assert_allclose(centres[0], expected, atol=1e-5)
+        np.testing.assert_allclose(sizes[0], 0.5 * bar_sizes(n, t), atol=1e-5)
+        if t == 1.0:
+            assert np.ptp(sizes[0]) < 1e-6  # round: every sprite of size S
+        else:
+            assert np.all(np.diff(sizes[0]) < 0)  # sharp: shrinking towards the tips
+
+
+def test_gpu_trails_follow_eq_3_7():
+    from systems.energy_wave.simulate import trail_fractions, trail_sizes
+
+    p0, p1 = np.array([0.0, 0.0, 0.0]), np.array([2.0, -1.0, 0.5])
+    centres, sizes = _expand_on_gpu(1, 8, [_record(p1, hit=p0)], size=0.2, trail_end=0.4)
+    np.testing.assert_allclose(centres[0], p0 + trail_fractions(8)[:, None] * (p1 - p0), atol=1e-5)
+    np.testing.assert_allclose(sizes[0], 0.2 * trail_sizes(8, 0.4), atol=1e-5)
+    centres, sizes = _expand_on_gpu(0, 1, [_record(p1, hit=p0), _record(p0)], size=0.2)
+    np.testing.assert_allclose(centres[:, 0], [p1, p0], atol=1e-6)  # single sprites sit on the particle

@@ -1,0 +1,134 @@
+"""Wave propagation (eq. 2.8–2.10): speed c, reflecting borders, damping, conserved volume, the stability limit."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from components.water_surface import STABILITY_LIMIT
+from systems.water_surface.surface import step_water
+from systems.water_surface.waves import courant_k, free_degree, neighbour_sum, propagate
+from tests.systems.water_surface.helpers import make_grid, make_state, water_config
+
+DT = 1.0 / 60.0
+
+
+def _gaussian(n: int, h: float, centre: tuple[float, float], sigma: float, height: float = 0.1) -> np.ndarray:
+    x = np.arange(n) * h
+    gx, gz = np.meshgrid(x, x)
+    return height * np.exp(-((gx - centre[0]) ** 2 + (gz - centre[1]) ** 2) / (2 * sigma ** 2))
+
+
+def _energy(z1: np.ndarray, z0: np.ndarray, k: float, degree: np.ndarray) -> float:
+    """The discrete energy leapfrog conserves: |z1 − z0|² + k·<z1, L z0>, L = D − W the graph Laplacian."""
+    lap = degree * z0 - neighbour_sum(z0)
+    return float(np.sum((z1 - z0) ** 2) + k * np.sum(z1 * lap))
+
+
+def test_neighbour_counts_make_the_borders_reflect():
+    d = free_degree(5, 6)
+    assert d[2, 3] == 4 and d[0, 3] == 3 and d[2, 0] == 3 and d[0, 0] == 2 and d[4, 5] == 2  # eq. 2.8–2.10
+
+
+def test_a_disturbance_travels_at_c():
+    n, h, c = 161, 0.05, 1.0
+    k = courant_k(c, h, DT)
+    centre = (n - 1) * h / 2
+    z = _gaussian(n, h, (centre, centre), sigma=0.15)
+    zp = z.copy()
+    degree = free_degree(n, n)
+    row = n // 2
+    radii = (1.5, 3.0)
+    cols = [row + int(round(r / h)) for r in radii]
+    history = []
+    for _ in range(240):  # 4 s: the ring reaches 3 m at 3 s, the border echo (4 m + 1 m) not before 5 s
+        z, zp = propagate(z, zp, k, degree)[0], z
+        history.append(z[row, cols])
+    history = np.array(history)
+    peak = np.argmax(history, axis=0) + 1  # steps at which the ring's crest passes each radius
+    speed = (radii[1] - radii[0]) / ((peak[1] - peak[0]) * DT)
+    assert speed == pytest.approx(c, rel=0.05)
+    arrival = np.argmax(history[:, 1] > 0.05 * history[:, 1].max()) + 1
+    assert arrival * DT == pytest.approx(radii[1] / c - 2 * 0.15 / c, abs=0.25)  # the front leads the crest
+
+
+def test_a_pulse_reflects_at_the_border_without_changing_sign():
+    nx, nz, h, c = 201, 3, 0.05, 1.0
+    k = courant_k(c, h, DT)
+    x = np.arange(nx) * h
+    x0, sigma = 5.0, 0.25
+    z = np.tile(np.exp(-((x - x0) ** 2) / (2 * sigma ** 2)), (nz, 1))  # moving towards +x (the wall at 10 m)
+    zp = np.tile(np.exp(-((x - x0 + c * DT) ** 2) / (2 * sigma ** 2)), (nz, 1))
+    degree = free_degree(nz, nx)
+    centroids = []
+    for _ in range(630):
+        z, zp = propagate(z, zp, k, degree)[0], z
+        w = np.clip(z[1], 0.0, None)
+        centroids.append(float(np.sum(w * x) / np.sum(w)))
+    assert max(centroids) > 9.7  # it reached the wall ...
+    back = centroids[599]  # ... and after 2·(10 − 5)/c = 10 s it is back where it started
+    assert back == pytest.approx(x0, abs=0.15)
+    assert centroids[629] < back - 0.3  # still moving away from the wall
+    assert z[1].max() > 0.9 and z[1].min() > -0.1  # reflected upright (a free end), barely dispersed
+
+
+def test_without_damping_the_discrete_energy_is_conserved():
+    grid = make_grid(40, 0.1)
+    cfg = water_config(resolution=[40, 40], spacing=0.1, wave_speed=2.0, damping=1.0)
+    state = make_state(grid)
+    state.heights[:] = _gaussian(40, 0.1, (1.5, 2.2), sigma=0.2)
+    state.previous[:] = state.heights
+    k = courant_k(2.0, 0.1, DT)
+    degree = free_degree(40, 40)
+    from systems.water_surface.geometry import empty_bodies
+
+    energies = []
+    for _ in range(300):
+        step_water(state, cfg, grid, empty_bodies(), DT)
+        energies.append(_energy(state.heights, state.previous, k, degree))
+    assert np.ptp(energies) < 1e-9 * energies[0]
+
+
+def test_damping_below_one_makes_the_energy_decay_and_keeps_the_mean():
+    grid = make_grid(40, 0.1)
+    cfg = water_config(resolution=[40, 40], spacing=0.1, wave_speed=2.0, damping=0.99)
+    state = make_state(grid)
+    state.heights[:] = _gaussian(40, 0.1, (1.5, 2.2), sigma=0.2)  # a mound: its mean is not zero
+    state.previous[:] = state.heights
+    mean0 = state.heights.mean()
+    k = courant_k(2.0, 0.1, DT)
+    degree = free_degree(40, 40)
+    from systems.water_surface.geometry import empty_bodies
+
+    energies = []
+    for _ in range(300):
+        step_water(state, cfg, grid, empty_bodies(), DT)
+        energies.append(_energy(state.heights - mean0, state.previous - mean0, k, degree))
+    # z(t+1) = d·(2 z − z(t−1) − k·L z): the amplitude shrinks by √d per step, the energy by d
+    assert energies[-1] / energies[0] == pytest.approx(0.99 ** 300, rel=0.3)
+    assert all(b < a for a, b in zip(energies[::30], energies[30::30]))
+    assert state.heights.mean() == pytest.approx(mean0, abs=1e-12)  # no water leaks away
+
+
+def test_the_update_alone_conserves_the_mean():
+    rng = np.random.default_rng(2)
+    z = rng.normal(size=(30, 20))
+    zp = z + 0.01 * rng.normal(size=(30, 20))
+    zp += z.mean() - zp.mean()
+    degree = free_degree(30, 20)
+    for _ in range(100):
+        z, zp = propagate(z, zp, 0.4, degree)[0], z
+    assert z.mean() == pytest.approx(zp.mean(), abs=1e-12)
+
+
+@pytest.mark.parametrize("courant, stable", [(0.70, True), (STABILITY_LIMIT, True), (0.75, False)])
+def test_the_2d_stability_limit_is_where_the_scheme_blows_up(courant, stable):
+    rng = np.random.default_rng(0)
+    z = rng.normal(size=(24, 24)) * 1e-3
+    zp = z.copy()
+    degree = free_degree(24, 24)
+    with np.errstate(over="ignore", invalid="ignore"):
+        for _ in range(1500):
+            z, zp = propagate(z, zp, courant ** 2, degree)[0], z
+    grew = np.abs(z).max() / 1e-3
+    assert (grew < 10.0) if stable else not (grew < 1e3)  # NaN after an overflow counts as blown up
