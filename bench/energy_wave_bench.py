@@ -96,14 +96,10 @@ def scene_text(particles: int, textures_each: int, width: int, height: int, emit
 
 
 def make_app(text: str) -> App:
-    folder = ROOT / "configs" / "scenes"
-    with tempfile.NamedTemporaryFile("w", suffix=".toml", dir=folder, delete=False) as f:
-        f.write(text)
-        path = Path(f.name)
-    try:
-        return App(path)
-    finally:
-        path.unlink()
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "energy_wave_bench.toml"
+        path.write_text(text, encoding="utf-8")
+        return App(path, configs_root=ROOT / "configs")
 
 
 def states(app: App) -> list[EnergyWaveState]:

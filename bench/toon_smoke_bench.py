@@ -140,9 +140,12 @@ def main() -> int:
     steps_per_s = n / wall_total
     cpu_steps_per_s = n / cpu_total
     st = result["stats"]
+    target = ""
+    if args.preset == "paper":  # the target is for the paper's workload only
+        met = "met" if steps_per_s >= TARGET_RATIO * PAPER_FPS else "NOT met"
+        target = f", target ≥ {TARGET_RATIO:.0f}× = {TARGET_RATIO * PAPER_FPS:.0f} steps/s: {met}"
     print(f"\nsteps per second (wall clock, simulation + isosurface): {steps_per_s:7.1f}   "
-          f"(paper: {PAPER_FPS} fps, ratio {steps_per_s / PAPER_FPS:6.1f}×, target ≥ {TARGET_RATIO:.0f}× = "
-          f"{TARGET_RATIO * PAPER_FPS:.0f} steps/s: {'met' if steps_per_s >= TARGET_RATIO * PAPER_FPS else 'NOT met'})")
+          f"(paper: {PAPER_FPS} fps, ratio {steps_per_s / PAPER_FPS:6.1f}×{target})")
     print(f"steps per second (process CPU time):                     {cpu_steps_per_s:7.1f}   "
           f"(ratio {cpu_steps_per_s / PAPER_FPS:6.1f}×; the 2 cores are shared, CPU time is the steadier figure)")
     print(f"\nmax |∇·u| before projection (1/s): mean {np.mean(st['divergence_before']):.3g}; after: mean "

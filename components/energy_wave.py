@@ -157,7 +157,7 @@ class EnergyWaveEmitter(ConfigModel):
         1.0, ge=0.0, le=10_000.0,
         description="Random spread of c (circular-separated): c ± this, uniform, clamped at 0.")
     repulsion: float = Field(
-        4.0, ge=0.0, le=1e6, description="r: repulsion from neighbours at distance 1 m (eq. 3.3).")
+        4.0, ge=0.0, le=1e6, description="r: repulsion from a neighbour at distance 1 (in equation_unit) (eq. 3.3).")
     repulsion_radius: float = Field(
         0.25, gt=0.0, le=100.0,
         description="Effective radius of the neighbour repulsion R (eq. 3.3), metres; also the spatial-hash cell.")
@@ -187,8 +187,10 @@ class EnergyWaveEmitter(ConfigModel):
     color: Color3 = Field((0.35, 0.65, 1.0), description="Glow colour (linear RGB) at the rim of each sprite.")
     core_color: Color3 = Field((1.0, 1.0, 1.0), description="Colour at the centre of each sprite (linear RGB).")
     intensity: float = Field(0.06, ge=0.0, le=1000.0, description="HDR brightness multiplier of every sprite.")
-    glow: float = Field(0.5, ge=0.0, le=100.0, description="Strength of the bloom pass added around the wave.")
-    glow_radius: float = Field(2.0, ge=0.5, le=8.0, description="Bloom blur radius in glow-buffer pixels.")
+    glow: float = Field(0.5, ge=0.0, le=100.0, description="Strength of the bloom added around the wave (a frame uses the "
+                                                                "largest among its emitters).")
+    glow_radius: float = Field(2.0, ge=0.5, le=8.0, description="Bloom blur radius in glow-buffer pixels (largest among the "
+                                                                "emitters).")
     # ---- emission
     emitting: bool = Field(True, description="Emit continuously from the start (scripts: energy_wave.set_emitting).")
     emission_rate: float = Field(1200.0, ge=0.0, le=1e7, description="Particles per second while emitting.")

@@ -48,13 +48,13 @@ class SmokeSourceConfig(ConfigModel):
     name: str = Field("source", min_length=1, max_length=64,
                       description="Name scripts use with the 'toon_smoke.set_source' command.")
     position: Vec3 = Field((0.0, -1.5, 0.0), description="Centre in the volume's local frame, metres.")
-    radius: float = Field(0.35, gt=0.0, le=1000.0, description="Radius of the emitting sphere, metres.")
-    density_rate: float = Field(4.0, ge=0.0, le=1000.0,
+    radius: float = Field(0.4, gt=0.0, le=1000.0, description="Radius of the emitting sphere, metres.")
+    density_rate: float = Field(8.0, ge=0.0, le=1000.0,
                                 description="Density ρ added per second inside the sphere (the source term s of "
                                             "Stam's ∂ρ/∂t = … + s).")
-    temperature_rate: float = Field(2.0, ge=0.0, le=1000.0,
+    temperature_rate: float = Field(6.0, ge=0.0, le=1000.0,
                                     description="Temperature T added per second inside the sphere (drives buoyancy).")
-    velocity: Vec3 = Field((0.0, 1.0, 0.0), description="Velocity u imposed inside the sphere, m/s (local frame).")
+    velocity: Vec3 = Field((0.0, 2.0, 0.0), description="Velocity u imposed inside the sphere, m/s (local frame).")
     velocity_jitter: float = Field(0.0, ge=0.0, le=100.0,
                                    description="Random velocity (uniform in ±this per axis, m/s) added to the imposed "
                                                "velocity each step, from the entity's seeded stream: breaks symmetry "
@@ -70,7 +70,8 @@ class SmokeSourceConfig(ConfigModel):
 
 class ToonSmokeVolumeConfig(ConfigModel):
     """A box of cel-shaded smoke: stable fluids on a coarse grid, particles adding density blobs on a finer display
-    grid, Perlin noise, a marching-cubes isosurface shaded from a 1D toon ramp, and an outline."""
+    grid, Perlin noise, a marching-cubes isosurface shaded from a 1D toon ramp, and an outline.  The defaults are the
+    paper's setup (configs/effects/toon_smoke/paper.toml) without its sphere obstacle."""
 
     # --- grids (§3.1, §3.2)
     simulation_resolution: GridSize = Field(
@@ -81,7 +82,8 @@ class ToonSmokeVolumeConfig(ConfigModel):
     extent: Vec3 = Field((4.0, 4.0, 4.0),
                          description="Size of the volume in metres (x, y, z); cells must come out cubic.")
     time_step: float | None = Field(None, gt=0.0, le=0.25,
-                                    description="Δt of one fluid step in seconds (default: the engine's fixed step).")
+                                    description="Δt of the fluid step taken once per engine tick, seconds (default: the "
+                                                "engine's fixed step; another value plays the smoke faster or slower).")
     # --- fluid (§3.1)
     viscosity: float = Field(0.0, ge=0.0, le=10.0, description="Kinematic viscosity ν of the Navier–Stokes "
                                                                "diffusion term ν∇²u, m²/s (0 = inviscid).")
@@ -96,7 +98,7 @@ class ToonSmokeVolumeConfig(ConfigModel):
     open_sides: list[OpenSide] = Field(["+y"], max_length=6,
                                        description="Sides of the box that are open (pressure 0 outside, smoke leaves); "
                                                    "the others are walls where the normal velocity is 0.")
-    buoyancy: float = Field(1.0, ge=0.0, le=100.0,
+    buoyancy: float = Field(2.0, ge=0.0, le=100.0,
                             description="β: upward acceleration per unit temperature, m/s² (hot smoke rises).")
     smoke_weight: float = Field(0.05, ge=0.0, le=100.0,
                                 description="α: downward acceleration per unit density, m/s² (dense smoke sinks).")
@@ -104,7 +106,7 @@ class ToonSmokeVolumeConfig(ConfigModel):
                                          description="ε of vorticity confinement (Fedkiw et al. 2001); 0 = off.")
     density_dissipation: float = Field(0.0, ge=0.0, le=100.0,
                                        description="Density fades as ρ ← ρ / (1 + rate·Δt); rate per second.")
-    temperature_cooling: float = Field(0.5, ge=0.0, le=100.0,
+    temperature_cooling: float = Field(0.15, ge=0.0, le=100.0,
                                        description="Temperature fades as T ← T / (1 + rate·Δt); rate per second.")
     density_limit: float = Field(4.0, gt=0.0, le=1000.0,
                                  description="Upper bound of the density ρ on both grids (sources saturate there).")
@@ -116,7 +118,7 @@ class ToonSmokeVolumeConfig(ConfigModel):
     obstacle_radius: float = Field(0.0, ge=0.0, le=1000.0,
                                    description="Radius of the volume's own sphere obstacle, metres (0 = none).")
     obstacle_center: Vec3 = Field((0.0, 0.0, 0.0), description="Centre of the sphere obstacle, local metres.")
-    obstacle_color: Color3 = Field((0.85, 0.12, 0.1), description="Colour the sphere obstacle is drawn with.")
+    obstacle_color: Color3 = Field((0.85, 0.12, 0.1), description="Colour the sphere obstacle is drawn with (as shown on screen).")
     collide_with_colliders: bool = Field(True, description="Other entities' Colliders inside the volume are solid.")
     # --- particles and density blobs (§3.3, figure 2)
     particle_count: int = Field(1000, ge=0, le=100_000, description="Number of particles; paper: 1000.")
@@ -124,16 +126,16 @@ class ToonSmokeVolumeConfig(ConfigModel):
         "volume", description="Where particles are (re)born: anywhere in the volume (paper) or inside the sources.")
     particle_lifetime: float = Field(0.0, ge=0.0, le=1e4,
                                      description="Seconds before a particle is reborn (0 = only when it leaves).")
-    particle_density_threshold: float = Field(0.3, ge=0.0, le=1000.0,
+    particle_density_threshold: float = Field(0.25, ge=0.0, le=1000.0,
                                               description="D_p: a particle adds a blob only where density > D_p.")
-    blob_density: float = Field(0.6, ge=0.0, le=1000.0, description="Density added at a blob's centre.")
-    blob_radius: float = Field(0.12, gt=0.0, le=100.0, description="Blob radius R at density D_p, metres.")
-    blob_radius_per_density: float = Field(0.05, ge=0.0, le=100.0,
+    blob_density: float = Field(0.8, ge=0.0, le=1000.0, description="Density added at a blob's centre.")
+    blob_radius: float = Field(0.2, gt=0.0, le=100.0, description="Blob radius R at density D_p, metres.")
+    blob_radius_per_density: float = Field(0.1, ge=0.0, le=100.0,
                                            description="dR/dρ: radius growth per unit of density above D_p, metres.")
-    blob_radius_max: float = Field(0.2, gt=0.0, le=100.0, description="Cap on the blob radius R, metres.")
-    blob_stretch: float = Field(0.5, ge=0.0, le=100.0,
+    blob_radius_max: float = Field(0.3, gt=0.0, le=100.0, description="Cap on the blob radius R, metres.")
+    blob_stretch: float = Field(0.4, ge=0.0, le=100.0,
                                 description="Stretch s = 1 + this·|u| along the velocity (figure 2), per m/s.")
-    blob_stretch_max: float = Field(2.0, ge=1.0, le=8.0,
+    blob_stretch_max: float = Field(1.6, ge=1.0, le=8.0,
                                     description="Cap on s; the blob is an ellipsoid R·s along u and R/√s across.")
     # --- noise (§3.4)
     noise_scale: float = Field(0.5, gt=0.0, le=1000.0, description="Wavelength of the Perlin noise, metres.")
@@ -141,7 +143,7 @@ class ToonSmokeVolumeConfig(ConfigModel):
                                   description="Display density is multiplied by max(0, 1 + strength·noise).")
     noise_octaves: int = Field(2, ge=1, le=6, description="Octaves of the fractal sum of Perlin noise.")
     # --- isosurface and toon shading (§3.5, figure 3)
-    iso_density: float = Field(0.5, gt=0.0, le=1000.0, description="D_iso: density of the isosurface.")
+    iso_density: float = Field(0.3, gt=0.0, le=1000.0, description="D_iso: density of the isosurface.")
     ramp_colors: list[Color3] = Field(
         [(1.0, 1.0, 1.0), (0.72, 0.75, 0.86), (0.45, 0.48, 0.62)], min_length=1, max_length=16,
         description="Toon ramp colours as shown on screen (0..1), one per band, from c = 0 upwards.")
@@ -150,7 +152,7 @@ class ToonSmokeVolumeConfig(ConfigModel):
         description="Where each band starts on the ramp coordinate c = (−v·g + 1)/2 (ascending, first 0). "
                     "c = 0 faces the viewer, 0.5 at the silhouette.")
     outline_width: float = Field(1.5, ge=0.0, le=16.0, description="Outline width in pixels (0 = no outline).")
-    outline_color: Color3 = Field((0.08, 0.08, 0.12), description="Outline colour (linear RGB).")
+    outline_color: Color3 = Field((0.08, 0.08, 0.12), description="Outline colour (as shown on screen, 0..1).")
     outline_depth_threshold: float = Field(0.04, gt=0.0, le=10.0,
                                            description="Relative depth jump that draws an inner contour line.")
 

@@ -180,6 +180,9 @@ class WaterState:
     splashes: list = field(default_factory=list)  # pending (u, v, height) dents from impacts, applied next step
     last_raised: F64 = field(default_factory=lambda: _empty(0), metadata={"hash": False})  # diagnostics
     degree: F64 | None = field(default=None, metadata={"hash": False})  # cached neighbour count of a free grid
+    coefficient: F64 | None = field(default=None, metadata={"hash": False})  # cached 2 − k·degree (eq. 2.8)
+    coefficient_k: float = field(default=-1.0, metadata={"hash": False})
+    scratch: F64 | None = field(default=None, metadata={"hash": False})  # work array
 
     @property
     def shape(self) -> tuple[int, int]:

@@ -18,3 +18,6 @@ class Impact:
     impulse: tuple[float, float, float]
     source: int = 0
     kind: str = "generic"
+    normal: tuple[float, float, float] = (0.0, 0.0, 0.0)  # surface normal at the hit (unit), when known
+    energy: float = 0.0  # kinetic energy delivered (J), when known
+    count: int = 1  # how many hits this event aggregates

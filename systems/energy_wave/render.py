@@ -3,8 +3,8 @@
 Per frame, :func:`~systems.energy_wave.extract.extract_frame` packs one record per particle; they are uploaded to
 an RGBA32F texture (three texels a record) and drawn with instanced quads: per emitter, one draw for single
 sprites, one for trails (instances = particles × M) and one for bars (particles × N); the vertex shader finds its
-particle and sub-sprite from ``gl_InstanceID`` (eqs. 3.7–3.9). Blending is additive (ONE, ONE) with the depth test
-test on and depth writes off, so no sorting is needed.
+particle and sub-sprite from ``gl_InstanceID`` (eqs. 3.7–3.9). Blending is additive (ONE, ONE), depth-tested against
+the scene with no depth writes, so no sorting is needed.
 
 Passes per view, in the transparent phase (off-screen particles, Nguyen, GPU Gems 3 ch. 23: the soft sprites are
 fill-rate bound, so they are drawn at half resolution):

@@ -19,9 +19,11 @@ wide, narrowing by ``TR_SHORT`` per base length and closing over the last base l
 branch is drawn like the stem (``TE_VOLUM`` thinning).
 
 Vertices are 8 float32: position (plant-local, base at the origin), colour parameter (0 at the blade's root,
-1 at the tip), normal, kind (0 tube, 1 leaf, 2 line or dot).  Each level's triangles, lines and points of all
-plant variants are padded to one length with degenerate primitives, so a whole level draws with one
-instanced call per primitive type (the vertex shader fetches ``variant * count + gl_VertexID``).
+1 at the tip), normal, kind (0 tube, 1 leaf, 2 line or dot).  Meshes are indexed, and every plant variant of a
+level shares one topology: stems, branches, rings and dots are padded to the largest count of any variant
+with collapsed (zero-area, zero-length or repeated) elements.  So a whole level draws with one instanced,
+indexed call per primitive type: the index buffer is shared and the vertex shader fetches vertex
+``variant * vertex_count + gl_VertexID``.
 """
 
 from __future__ import annotations
@@ -32,8 +34,8 @@ import numpy as np
 
 from components.grass_field import GrassFieldConfig, GrassFieldState
 
-__all__ = ["FINE", "LEVELS", "PlantSkeleton", "LevelMesh", "plant_skeleton", "level_geometry",
-           "build_level_meshes", "cell_primitives", "plant_extent", "dot_spacing"]
+__all__ = ["FINE", "LEVELS", "PlantSkeleton", "LevelParts", "LevelMesh", "plant_skeleton", "level_parts",
+           "level_geometry", "build_level_meshes", "cell_primitives", "plant_extent", "dot_spacing"]
 
 FINE = 8  # integration steps per base length of the reference curve
 LEVELS = 4  # geometric levels 0..3
@@ -122,67 +124,26 @@ def _tangents(nodes: np.ndarray) -> np.ndarray:
     return np.where(length > 1e-12, d / np.maximum(length, 1e-12), [0.0, 1.0, 0.0])
 
 
-def tube(nodes: np.ndarray, radius: np.ndarray, side: np.ndarray, sides: int) -> np.ndarray:
-    """Triangles of tubes around polylines: ``nodes`` (B, M+1, 3), ``radius`` (B, M+1), ``side`` (B, 3).
+# ------------------------------------------------------------------------------------------ level parts
+@dataclass
+class LevelParts:
+    """The pieces of one plant variant at one level (table 1), before meshing.
 
-    ``sides = 4`` gives the square prism of level 1, more sides the cylinder of level 0.
-    Returns (B * M * sides * 6, 8) vertices (a triangle list).
+    ``stem`` (R, 3) and ``stem_radius`` (R,): the shortened stem; ``lower`` (B, Qb+1, 3) and ``lower_radius``:
+    the branches below the blade (None when TR_ROOT = 0); ``leaf`` (B, Q+1, 3), ``leaf_width`` and ``leaf_t``
+    (Q+1,): the blades; ``dots`` (D, 3): the level-3 dotted lines; ``side`` (B, 3): across each blade.
     """
-    t = _tangents(nodes)
-    s = side[:, None, :] - np.sum(side[:, None, :] * t, axis=-1, keepdims=True) * t
-    s /= np.maximum(np.linalg.norm(s, axis=-1, keepdims=True), 1e-12)
-    n = np.cross(t, s)
-    ang = 2.0 * np.pi * (np.arange(sides) + 0.5) / sides
-    radial = np.cos(ang)[None, None, :, None] * s[:, :, None, :] + np.sin(ang)[None, None, :, None] * n[:, :, None, :]
-    ring = nodes[:, :, None, :] + radius[:, :, None, None] * radial  # (B, M+1, S, 3)
-    verts = _vertices(ring, 0.0, radial, KIND_TUBE)
-    m = nodes.shape[1] - 1
-    i = np.arange(m)[:, None]
-    j = np.arange(sides)[None, :]
-    j1 = (j + 1) % sides
-    a, bb, c, d = (i, j), (i, j1), (i + 1, j), (i + 1, j1)
-    corners = [a, bb, c, bb, d, c]
-    rows = np.stack([np.broadcast_to(r, (m, sides)) for r, _ in corners], axis=-1)  # (M, S, 6)
-    cols = np.stack([np.broadcast_to(cc, (m, sides)) for _, cc in corners], axis=-1)
-    tri = verts[:, rows, cols]  # (B, M, S, 6, 8)
-    return tri.reshape(-1, VERTEX_FLOATS)
 
-
-def ribbon(centres: np.ndarray, width: np.ndarray, side: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Leaf blades: ``centres`` (B, Q+1, 3), ``width`` (Q+1,), ``side`` (B, 3), colour parameter ``t`` (Q+1,).
-
-    Returns (B * Q * 6, 8) vertices; the normal is the blade's upper face (the shader lights both faces).
-    """
-    tang = _tangents(centres)
-    normal = np.cross(side[:, None, :], tang)
-    normal /= np.maximum(np.linalg.norm(normal, axis=-1, keepdims=True), 1e-12)
-    half = 0.5 * width[None, :, None] * side[:, None, :]
-    left = _vertices(centres - half, t[None, :], normal, KIND_LEAF)
-    right = _vertices(centres + half, t[None, :], normal, KIND_LEAF)
-    tri = np.stack([left[:, :-1], right[:, :-1], left[:, 1:], right[:, :-1], right[:, 1:], left[:, 1:]], axis=2)
-    return tri.reshape(-1, VERTEX_FLOATS)
-
-
-def polyline(nodes: np.ndarray) -> np.ndarray:
-    """GL_LINES vertices of polylines ``nodes`` (B, M+1, 3): (B * M * 2, 8)."""
-    pairs = np.stack([nodes[:, :-1], nodes[:, 1:]], axis=2)
-    return _vertices(pairs, 0.0, [0.0, 1.0, 0.0], KIND_LINE).reshape(-1, VERTEX_FLOATS)
-
-
-def dots(nodes: np.ndarray, spacing: float) -> np.ndarray:
-    """GL_POINTS along polylines ``nodes`` (B, M+1, 3), one every ``spacing`` of arc length (at least one)."""
-    out = []
-    for line in nodes:  # build time only: a handful of branches
-        seg = np.linalg.norm(np.diff(line, axis=0), axis=1)
-        cum = np.concatenate([[0.0], np.cumsum(seg)])
-        total = cum[-1]
-        if total <= 0.0:
-            continue
-        count = max(1, int(total // spacing))
-        s = (np.arange(count) + 0.5) * (total / count)
-        pts = np.column_stack([np.interp(s, cum, line[:, a]) for a in range(3)])
-        out.append(_vertices(pts, 0.0, [0.0, 1.0, 0.0], KIND_LINE))
-    return np.concatenate(out) if out else np.zeros((0, VERTEX_FLOATS))
+    level: int
+    stem: np.ndarray
+    stem_radius: np.ndarray
+    lower: np.ndarray | None
+    lower_radius: np.ndarray | None
+    leaf: np.ndarray
+    leaf_width: np.ndarray
+    leaf_t: np.ndarray
+    dots: np.ndarray
+    side: np.ndarray
 
 
 def _truncate(nodes: np.ndarray, radius: np.ndarray, fraction: float) -> tuple[np.ndarray, np.ndarray]:
@@ -200,52 +161,202 @@ def dot_spacing(cfg: GrassFieldConfig) -> float:
     return cfg.dot_spacing_pixels * cfg.length_of_interest / cfg.level_thresholds[2]
 
 
-def level_geometry(skel: PlantSkeleton, cfg: GrassFieldConfig, level: int) -> tuple[np.ndarray, np.ndarray,
-                                                                                       np.ndarray]:
-    """Table 1: the (triangles, lines, points) vertex lists of one plant variant at ``level`` 0..3."""
+def _dots(lines: np.ndarray, spacing: float) -> np.ndarray:
+    """Points along polylines ``lines`` (B, M+1, 3), one every ``spacing`` of arc length (at least one each)."""
+    out = []
+    for line in lines:  # build time only: a handful of polylines
+        cum = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(line, axis=0), axis=1))])
+        if cum[-1] <= 0.0:
+            continue
+        count = max(1, int(cum[-1] // spacing))
+        s = (np.arange(count) + 0.5) * (cum[-1] / count)
+        out.append(np.column_stack([np.interp(s, cum, line[:, a]) for a in range(3)]))
+    return np.concatenate(out) if out else np.zeros((0, 3))
+
+
+def level_parts(skel: PlantSkeleton, cfg: GrassFieldConfig, level: int) -> LevelParts:
+    """Table 1 for one plant variant: stem length and shape, leaf subdivisions, dotted lines at level 3."""
     subdiv = cfg.leaf_subdivisions[level]
     stem, stem_r = _truncate(skel.stem_nodes, skel.stem_radius, cfg.stem_length_fractions[level])
     n_branch = len(skel.branch_nodes)
-    tris, lines, points = [], [], []
-    # the part of each branch below the blade, drawn like the stem
-    lower = None
+    lower = lower_r = None
     if skel.leaf_root > 1e-6:
-        q = max(1, int(np.ceil(skel.leaf_root * subdiv)))
-        u = np.linspace(0.0, skel.leaf_root, q + 1)
+        qb = max(1, int(np.ceil(skel.leaf_root * subdiv)))
+        u = np.linspace(0.0, skel.leaf_root, qb + 1)
         lower = skel.sample(u)
-        lower_r = np.broadcast_to(skel.branch_radius(u), (n_branch, q + 1))
-    if level <= 1:
-        sides = cfg.stem_sides if level == 0 else 4
-        tris.append(tube(stem[None], stem_r[None], np.array([[1.0, 0.0, 0.0]]), sides))
-        if lower is not None:
-            tris.append(tube(lower, lower_r, skel.branch_side, sides))
-    elif level == 2:
-        lines.append(polyline(stem[None]))
-        if lower is not None:
-            lines.append(polyline(lower))
-    else:
-        spacing = dot_spacing(cfg)
-        points.append(dots(stem[None], spacing))
-        if lower is not None:
-            points.append(dots(lower, spacing))
-    # the leaf blades
+        lower_r = np.broadcast_to(skel.branch_radius(u), (n_branch, qb + 1)).copy()
     q = max(1, int(np.ceil((skel.segments - skel.leaf_root) * subdiv)))
     u = np.linspace(skel.leaf_root, skel.segments, q + 1)
     t = (u - skel.leaf_root) / max(skel.segments - skel.leaf_root, 1e-9)
-    tris.append(ribbon(skel.sample(u), skel.blade_width(u), skel.branch_side, t))
-    cat = lambda parts: np.concatenate(parts) if parts else np.zeros((0, VERTEX_FLOATS))  # noqa: E731
-    return cat(tris), cat(lines), cat(points)
+    dots = np.zeros((0, 3))
+    if level == 3:
+        spacing = dot_spacing(cfg)
+        dots = _dots(stem[None], spacing)
+        if lower is not None:
+            dots = np.vstack([dots, _dots(lower, spacing)])
+    return LevelParts(level, stem, stem_r, lower, lower_r, skel.sample(u), skel.blade_width(u), t, dots,
+                      skel.branch_side)
+
+
+# ------------------------------------------------------------------------------------------- meshing
+@dataclass(frozen=True)
+class _Dims:
+    """The shared topology of a level: counts every variant is padded to."""
+
+    level: int
+    sides: int  # tube sides (0: no tubes at this level)
+    stem: int  # stem nodes
+    branches: int
+    lower: int  # nodes of each branch below the blade (0: none)
+    leaf: int  # nodes along each blade
+    dots: int
+
+    def blocks(self) -> dict[str, tuple[int, int]]:
+        """Vertex ranges (start, count) of each block in a variant's vertex array."""
+        sizes = [("stem", self.stem * max(self.sides, 1)), ("lower", self.branches * self.lower * max(self.sides, 1)),
+                 ("leaf", self.branches * self.leaf * 2), ("dots", self.dots)]
+        out, start = {}, 0
+        for name, size in sizes:
+            out[name] = (start, size)
+            start += size
+        return out
+
+    @property
+    def vertices(self) -> int:
+        return sum(size for _, size in self.blocks().values())
+
+
+def _dims(parts: list[LevelParts], cfg: GrassFieldConfig, branches: int) -> _Dims:
+    level = parts[0].level
+    sides = cfg.stem_sides if level == 0 else 4 if level == 1 else 0
+    lower = max((p.lower.shape[1] if p.lower is not None else 0) for p in parts)
+    return _Dims(level, sides, max(len(p.stem) for p in parts), branches, lower,
+                 max(p.leaf.shape[1] for p in parts), max(len(p.dots) for p in parts))
+
+
+def _pad_rows(arr: np.ndarray, count: int, axis: int) -> np.ndarray:
+    """Pad ``arr`` along ``axis`` to ``count`` by repeating its last element (collapsed, degenerate)."""
+    n = arr.shape[axis]
+    if n == count:
+        return arr
+    idx = np.minimum(np.arange(count), n - 1)
+    return np.take(arr, idx, axis=axis)
+
+
+def _pad_branches(arr: np.ndarray, count: int) -> np.ndarray:
+    """Pad the branch axis (0) to ``count`` with branches collapsed onto the plant's base (all zeros)."""
+    out = np.zeros((count,) + arr.shape[1:], dtype=np.float64)
+    out[:len(arr)] = arr
+    return out
+
+
+def _ring_vertices(nodes: np.ndarray, radius: np.ndarray, side: np.ndarray, sides: int) -> np.ndarray:
+    """Rings of tubes around polylines ``nodes`` (B, R, 3): (B, R, sides, 8) vertices with radial normals."""
+    t = _tangents(nodes)
+    s = side[:, None, :] - np.sum(side[:, None, :] * t, axis=-1, keepdims=True) * t
+    s /= np.maximum(np.linalg.norm(s, axis=-1, keepdims=True), 1e-12)
+    n = np.cross(t, s)
+    ang = 2.0 * np.pi * (np.arange(sides) + 0.5) / sides
+    radial = np.cos(ang)[None, None, :, None] * s[:, :, None, :] + np.sin(ang)[None, None, :, None] * n[:, :, None, :]
+    return _vertices(nodes[:, :, None, :] + radius[:, :, None, None] * radial, 0.0, radial, KIND_TUBE)
+
+
+def _tube_indices(start: int, tubes: int, rings: int, sides: int) -> np.ndarray:
+    """Triangles between consecutive rings of ``tubes`` tubes laid out as (tube, ring, side)."""
+    b, i, j = np.meshgrid(np.arange(tubes), np.arange(rings - 1), np.arange(sides), indexing="ij")
+    base = start + (b * rings + i) * sides
+    j1 = (j + 1) % sides
+    a, bb, c, d = base + j, base + j1, base + sides + j, base + sides + j1
+    return np.stack([a, bb, c, bb, d, c], axis=-1).ravel()
+
+
+def _strip_indices(start: int, strips: int, nodes: int) -> np.ndarray:
+    """Triangles of ribbons laid out as (strip, node, left/right)."""
+    b, i = np.meshgrid(np.arange(strips), np.arange(nodes - 1), indexing="ij")
+    left = start + (b * nodes + i) * 2
+    right, left1, right1 = left + 1, left + 2, left + 3
+    return np.stack([left, right, left1, right, right1, left1], axis=-1).ravel()
+
+
+def _line_indices(start: int, lines: int, nodes: int) -> np.ndarray:
+    b, i = np.meshgrid(np.arange(lines), np.arange(nodes - 1), indexing="ij")
+    first = start + b * nodes + i
+    return np.stack([first, first + 1], axis=-1).ravel()
+
+
+def _mesh_vertices(p: LevelParts, dims: _Dims) -> np.ndarray:
+    """One variant's vertices in the shared layout of ``dims``."""
+    out = []
+    stem = _pad_rows(p.stem, dims.stem, 0)
+    stem_r = _pad_rows(p.stem_radius, dims.stem, 0)
+    if dims.sides:
+        out.append(_ring_vertices(stem[None], stem_r[None], np.array([[1.0, 0.0, 0.0]]), dims.sides).reshape(-1, 8))
+    else:
+        out.append(_vertices(stem, 0.0, [0.0, 1.0, 0.0], KIND_LINE))
+    side = _pad_branches(p.side, dims.branches)
+    side[len(p.side):] = [1.0, 0.0, 0.0]
+    if dims.lower:
+        lower = _pad_branches(_pad_rows(p.lower, dims.lower, 1), dims.branches)
+        lower_r = _pad_branches(_pad_rows(p.lower_radius, dims.lower, 1), dims.branches)
+        if dims.sides:
+            out.append(_ring_vertices(lower, lower_r, side, dims.sides).reshape(-1, 8))
+        else:
+            out.append(_vertices(lower, 0.0, [0.0, 1.0, 0.0], KIND_LINE).reshape(-1, 8))
+    leaf = _pad_branches(_pad_rows(p.leaf, dims.leaf, 1), dims.branches)
+    width = _pad_rows(p.leaf_width, dims.leaf, 0)
+    t = _pad_rows(p.leaf_t, dims.leaf, 0)
+    normal = np.cross(side[:, None, :], _tangents(leaf))
+    normal /= np.maximum(np.linalg.norm(normal, axis=-1, keepdims=True), 1e-12)
+    half = 0.5 * width[None, :, None] * side[:, None, :]
+    pair = np.stack([_vertices(leaf - half, t[None, :], normal, KIND_LEAF),
+                     _vertices(leaf + half, t[None, :], normal, KIND_LEAF)], axis=2)
+    out.append(pair.reshape(-1, 8))
+    if dims.dots:
+        dots = _pad_rows(p.dots, dims.dots, 0) if len(p.dots) else np.zeros((dims.dots, 3))
+        out.append(_vertices(dots, 0.0, [0.0, 1.0, 0.0], KIND_LINE))
+    return np.concatenate(out)
+
+
+def _mesh_indices(dims: _Dims) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(triangles, lines, points) index lists of the shared layout."""
+    blocks = dims.blocks()
+    tris, lines = [], []
+    if dims.sides:
+        tris.append(_tube_indices(blocks["stem"][0], 1, dims.stem, dims.sides))
+        if dims.lower:
+            tris.append(_tube_indices(blocks["lower"][0], dims.branches, dims.lower, dims.sides))
+    else:
+        lines.append(_line_indices(blocks["stem"][0], 1, dims.stem))
+        if dims.lower and dims.level == 2:
+            lines.append(_line_indices(blocks["lower"][0], dims.branches, dims.lower))
+    tris.append(_strip_indices(blocks["leaf"][0], dims.branches, dims.leaf))
+    if dims.level == 3:
+        lines = []  # level 3 draws its stems as dots
+    points = np.arange(blocks["dots"][0], blocks["dots"][0] + dims.dots)
+    cat = lambda parts: np.concatenate(parts).astype(np.int32) if parts else np.zeros(0, np.int32)  # noqa: E731
+    return cat(tris), cat(lines), points.astype(np.int32)
+
+
+def level_geometry(skel: PlantSkeleton, cfg: GrassFieldConfig, level: int) -> tuple[np.ndarray, np.ndarray,
+                                                                                       np.ndarray]:
+    """Table 1 for one plant variant, expanded: (triangle, line, point) vertex lists (n, 8)."""
+    parts = level_parts(skel, cfg, level)
+    dims = _dims([parts], cfg, len(skel.branch_nodes))
+    verts = _mesh_vertices(parts, dims)
+    tris, lines, points = _mesh_indices(dims)
+    return verts[tris], verts[lines], verts[points]
 
 
 # ----------------------------------------------------------------------------------------- per level
 @dataclass
 class LevelMesh:
-    """One level's geometry for every plant variant, padded so all variants have the same vertex counts."""
+    """One level's indexed geometry for every plant variant, in one shared topology."""
 
     level: int
-    triangles: np.ndarray  # (V, 3 * T, 8) float32
-    lines: np.ndarray  # (V, 2 * L, 8) float32
-    points: np.ndarray  # (V, P, 8) float32
+    vertices: np.ndarray  # (V, n, 8) float32
+    triangles: np.ndarray  # (3T,) int32 indices, shared by every variant
+    lines: np.ndarray  # (2L,) int32
+    points: np.ndarray  # (P,) int32
     real_triangles: np.ndarray  # (V,) non-degenerate triangles per variant
     real_lines: np.ndarray  # (V,)
     real_points: np.ndarray  # (V,)
@@ -258,53 +369,46 @@ class LevelMesh:
     @property
     def padded_primitives(self) -> int:
         """Primitives one instance submits, padding included."""
-        return self.triangles.shape[1] // 3 + self.lines.shape[1] // 2 + self.points.shape[1]
+        return len(self.triangles) // 3 + len(self.lines) // 2 + len(self.points)
 
 
-def _pad(parts: list[np.ndarray], group: int) -> np.ndarray:
-    """Stack per-variant vertex lists into (V, n_max, 8), padding with degenerate primitives."""
-    n_max = max(len(p) for p in parts)
-    out = np.zeros((len(parts), n_max, VERTEX_FLOATS), dtype=np.float32)
-    for i, p in enumerate(parts):
-        out[i, :len(p)] = p
-        if len(p) < n_max:
-            out[i, len(p):] = p[0] if len(p) else 0.0  # zero area / zero length / a repeated dot
-    assert n_max % group == 0
-    return out
-
-
-def _real_triangles(tri: np.ndarray) -> int:
-    p = tri[:, :3].reshape(-1, 3, 3)
+def _real_triangles(verts: np.ndarray, index: np.ndarray) -> int:
+    if not len(index):
+        return 0
+    p = verts[index.reshape(-1, 3), :3]
     area = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
     return int(np.count_nonzero(area > 1e-12))
 
 
-def _real_lines(lines: np.ndarray) -> int:
-    p = lines[:, :3].reshape(-1, 2, 3)
+def _real_lines(verts: np.ndarray, index: np.ndarray) -> int:
+    if not len(index):
+        return 0
+    p = verts[index.reshape(-1, 2), :3]
     return int(np.count_nonzero(np.linalg.norm(p[:, 1] - p[:, 0], axis=1) > 1e-12))
 
 
 def build_level_meshes(cfg: GrassFieldConfig, state: GrassFieldState) -> list[LevelMesh]:
     """Levels 0-3 of every plant variant (level 0 from figure 1, levels 1-3 derived automatically)."""
     skeletons = [plant_skeleton(cfg, state, v) for v in range(cfg.plant_variants)]
+    branches = max(len(s.branch_nodes) for s in skeletons)
     meshes = []
     for level in range(LEVELS):
-        geo = [level_geometry(s, cfg, level) for s in skeletons]
-        meshes.append(LevelMesh(
-            level, _pad([g[0] for g in geo], 3), _pad([g[1] for g in geo], 2), _pad([g[2] for g in geo], 1),
-            np.array([_real_triangles(g[0]) for g in geo]), np.array([_real_lines(g[1]) for g in geo]),
-            np.array([len(g[2]) for g in geo])))
+        parts = [level_parts(s, cfg, level) for s in skeletons]
+        dims = _dims(parts, cfg, branches)
+        verts = np.stack([_mesh_vertices(p, dims) for p in parts]).astype(np.float32)
+        tris, lines, points = _mesh_indices(dims)
+        v64 = verts.astype(np.float64)
+        meshes.append(LevelMesh(level, verts, tris, lines, points,
+                                np.array([_real_triangles(v, tris) for v in v64]),
+                                np.array([_real_lines(v, lines) for v in v64]),
+                                np.array([len(p.dots) for p in parts])))
     return meshes
 
 
 def plant_extent(meshes: list[LevelMesh]) -> tuple[float, float]:
     """(largest horizontal reach from the base, largest height) over all variants and levels, unscaled."""
-    reach, height = 0.0, 0.0
-    for m in meshes:
-        for arr in (m.triangles, m.lines, m.points):
-            if arr.size:
-                reach = max(reach, float(np.sqrt(arr[..., 0] ** 2 + arr[..., 2] ** 2).max()))
-                height = max(height, float(arr[..., 1].max()))
+    reach = max(float(np.hypot(m.vertices[..., 0], m.vertices[..., 2]).max()) for m in meshes)
+    height = max(float(m.vertices[..., 1].max()) for m in meshes)
     return reach, height
 
 

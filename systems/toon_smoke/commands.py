@@ -39,7 +39,8 @@ def _volume(world: World, entity: int, volume: int | str | None) -> tuple[int, T
 
 def set_source(world: World, entity: int, name: str, volume: int | str | None = None, **changes: Any) -> None:
     """Change a source of a volume: any of ``enabled``, ``density_rate``, ``temperature_rate``, ``velocity``,
-    ``velocity_jitter``, ``radial_speed``, ``position``, ``radius``, ``start_time``, ``duration`` (validated like the TOML keys)."""
+    ``velocity_jitter``, ``radial_speed``, ``position``, ``radius``, ``start_time``, ``duration`` (validated like
+    the TOML keys; a bad value raises ConfigError naming the key)."""
     _, _, state = _volume(world, entity, volume)
     found = {s.name: s for s in state.sources}
     if name not in found:

@@ -8,7 +8,8 @@ Per view, two passes go into the render graph:
 * ``toon_smoke.outline.<view>``: reads the edge buffer and paints the silhouette and inner contour lines over the
   view's colour.
 
-The meshes are uploaded only when the simulation re-meshed (``mesh_version``).
+The meshes are uploaded only when the simulation re-meshed (``mesh_version``).  At most 16 volumes are drawn (the
+outline pass keeps their parameters in uniform arrays).
 """
 
 from __future__ import annotations
@@ -91,6 +92,9 @@ class ToonSmokeFeature(RenderFeature):
     def extract(self, world) -> list[VolumeDraw]:
         out = []
         query = world.query(Transform, ToonSmokeVolumeConfig, ToonSmokeState)
+        alive = {entity for entity, _ in query}
+        for entity in [e for e in self._meshes if e not in alive]:  # despawned volumes
+            self._meshes.pop(entity).release()
         for index, (entity, (t, cfg, state)) in enumerate(query[:MAX_VOLUMES]):
             gpu = self._meshes.get(entity)
             mesh = None
@@ -112,8 +116,8 @@ class ToonSmokeFeature(RenderFeature):
 
     def _upload(self, draw: VolumeDraw) -> _GpuMesh | None:
         gpu = self._meshes.get(draw.entity)
-        if draw.mesh is None:
-            return gpu
+        if draw.mesh is None or (gpu is not None and gpu.version == draw.mesh_version):
+            return gpu  # unchanged, or already uploaded for an earlier view this frame
         verts, indices = draw.mesh
         vdata, idata = verts.tobytes() or b"\0" * 24, indices.tobytes() or b"\0" * 12
         if gpu is None or gpu.vbo.size < len(vdata) or gpu.ibo.size < len(idata):

@@ -23,7 +23,7 @@ class Puffer(Script):
         volume: str | None = Field(None, description="Name of the volume entity (default: this entity).")
 
     def on_start(self) -> None:
-        self.timer = self.params.interval
+        self.timer = 0.0  # the first puff after one interval
 
     def on_update(self, dt: float) -> None:
         self.timer += dt

@@ -7,9 +7,9 @@
 2. Points of D' on a grid line or vertex are nudged slightly inwards (figure 2.3).
 3. Added points N (section 2.2.3): the vertices L' and the crossings M' of D''s edges with the grid lines, in
    order along the outline, with the outline segments between consecutive points.
-4. Wave generation (eq. 2.5–2.7): d(t) is how far the outline point moved in one step; it rises by α·d(t) when
-   its position at t − 1 lies inside the cross-section at t, and sinks by α·d(t) when its position at t lay
-   inside the cross-section at t − 1.
+4. Wave generation (eq. 2.5–2.7): d(t) is how far the outline moved at N_c in one step; N_c rises by α·d(t)
+   when its position at t − 1 lies inside the cross-section at t, and sinks by α·d(t) when its position at t
+   lay inside the cross-section at t − 1.
 5. Coupling with the grid (eq. 2.11, 2.12): pairs of points within radius h with weights r_k / h = 1 − |PN| / h,
    and the grid vertices inside the cross-section, which become a reflecting obstacle.
 """
@@ -20,16 +20,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from systems.water_surface.geometry import (BOX, EPS_LINE, F64, I64, NUDGE, SPHERE, Bodies, Grid, inside_polygons,
-                                            polygon_edges, ranges)
+from systems.water_surface.geometry import BOX, EPS_LINE, F64, I64, NUDGE, Bodies, Grid, ranges
 
-__all__ = ["AddedPoints", "Sections", "added_points", "coupling_pairs", "cross_sections", "nearest_on_outline", "nudge", "outline_impulse",
-           "solid_vertices"]
+__all__ = ["AddedPoints", "Edges", "Sections", "added_points", "coupling_pairs", "cross_sections",
+           "nearest_on_outline", "nudge", "outline_impulse", "solid_vertices"]
 
 # Box corners c = (sx, sy, sz) ∈ {−1, 1}³ and its 12 edges (corner pairs that differ along one axis).
 _SIGNS = np.array([[sx, sy, sz] for sx in (-1.0, 1.0) for sy in (-1.0, 1.0) for sz in (-1.0, 1.0)])
 _EDGES = np.array([(a, b) for a in range(8) for b in range(a + 1, 8)
                    if np.count_nonzero(_SIGNS[a] != _SIGNS[b]) == 1], dtype=np.int64)
+_EA, _EB = _EDGES[:, 0], _EDGES[:, 1]
 
 
 def _shared_faces() -> np.ndarray:
@@ -50,6 +50,46 @@ def _shared_faces() -> np.ndarray:
 _SHARED_FACE = _shared_faces()
 _MAX_BOX_VERTICES = 6  # a plane cuts a box in at most a hexagon
 _ON_OUTLINE = 3.0 * NUDGE  # grid units: this close to the outline counts as on it in eq. 2.6 / 2.7 (> the nudge)
+_NEIGHBOUR_CELLS = np.array([(di, dj) for dj in (-1, 0, 1) for di in (-1, 0, 1)], np.int64)
+
+
+@dataclass
+class Edges:
+    """The edges k → k + 1 of padded polygons (B, V): start, direction, and the inward half-plane of each
+    (n·p > c inside; padding edges have n = 0, c = −∞ so every point is inside them)."""
+
+    ax: F64
+    ay: F64
+    ex: F64
+    ey: F64
+    nx: F64
+    ny: F64
+    c: F64
+    valid: np.ndarray
+
+    @staticmethod
+    def of(polygons: F64, counts: I64) -> Edges:
+        b, v = polygons.shape[:2]
+        k = np.arange(v)
+        valid = k < counts[:, None]
+        nxt = np.where(k + 1 < counts[:, None], k + 1, 0)
+        start = polygons
+        end = polygons[np.arange(b)[:, None], nxt]
+        ex, ey = end[..., 0] - start[..., 0], end[..., 1] - start[..., 1]
+        length = np.hypot(ex, ey)
+        real = valid & (length > 0.0)
+        inv = 1.0 / np.where(real, length, 1.0)
+        nx, ny = np.where(real, -ey * inv, 0.0), np.where(real, ex * inv, 0.0)
+        c = np.where(real, nx * start[..., 0] + ny * start[..., 1], -np.inf)
+        return Edges(start[..., 0], start[..., 1], ex, ey, nx, ny, c, valid)
+
+    def inside(self, points: F64, body: I64, margin: float) -> np.ndarray:
+        """Whether ``points[p]`` lies inside polygon ``body[p]`` by more than ``margin`` (negative: on or near the
+        outline counts too). Polygons with fewer than 3 vertices contain nothing."""
+        if len(points) == 0:
+            return np.zeros(0, bool)
+        d = self.nx[body] * points[:, :1] + self.ny[body] * points[:, 1:] - self.c[body]
+        return np.all(d > margin, axis=1) & (self.valid[body, 2])
 
 
 @dataclass
@@ -60,74 +100,89 @@ class Sections:
     counts: I64
     vertex_feature: I64  # (B, V): the box edge or sphere vertex each L' comes from
     edge_feature: I64  # (B, V): the box face or sphere edge that edge k → k + 1 lies on
+    _edges: Edges | None = None
 
     @property
-    def cuts(self) -> np.ndarray:
-        return self.counts >= 3
+    def edges(self) -> Edges:
+        if self._edges is None:
+            self._edges = Edges.of(self.polygons, self.counts)
+        return self._edges
+
+    def with_polygons(self, polygons: F64) -> Sections:
+        return Sections(polygons, self.counts, self.vertex_feature, self.edge_feature)
+
+    def centres(self) -> F64:
+        valid = (np.arange(self.polygons.shape[1]) < self.counts[:, None])[..., None]
+        return np.sum(np.where(valid, self.polygons, 0.0), axis=1) / np.maximum(self.counts, 1)[:, None]
 
 
 def cross_sections(bodies: Bodies, plane_y: F64, grid: Grid, sphere_segments: int) -> Sections:
     """Cross-section polygon D' of every body with the horizontal plane y = plane_y[b] (section 2.2.2)."""
-    B = len(bodies)
+    n = len(bodies)
     is_box = bodies.shapes == BOX
-    width = max(_MAX_BOX_VERTICES if is_box.any() else 0, sphere_segments if (~is_box).any() else 0, 3)
-    polygons = np.zeros((B, width, 2))
-    counts = np.zeros(B, np.int64)
-    vfeat = np.zeros((B, width), np.int64)
-    efeat = np.zeros((B, width), np.int64)
-    if is_box.any():
+    boxes, spheres = bool(is_box.any()), not bool(is_box.all())
+    width = max(_MAX_BOX_VERTICES if boxes else 0, sphere_segments if spheres else 0, 3)
+    if boxes and not spheres and width == _MAX_BOX_VERTICES:  # the common case: only boxes
+        p, c, f = _box_sections(bodies, plane_y, grid)
+        return Sections(p, c, f, _box_edge_faces(f, c))
+    polygons = np.zeros((n, width, 2))
+    counts = np.zeros(n, np.int64)
+    vfeat = np.zeros((n, width), np.int64)
+    efeat = np.zeros((n, width), np.int64)
+    if boxes:
         idx = np.flatnonzero(is_box)
-        p, n, f = _box_sections(bodies.take(idx), plane_y[idx], grid)
-        polygons[idx, :_MAX_BOX_VERTICES], counts[idx], vfeat[idx, :_MAX_BOX_VERTICES] = p, n, f
-        nxt = np.roll(f, -1, axis=1)
-        nxt = np.where(np.arange(_MAX_BOX_VERTICES)[None, :] + 1 < n[:, None], nxt, f[:, :1])
-        shared = _SHARED_FACE[f, nxt]
-        efeat[idx, :_MAX_BOX_VERTICES] = np.where(shared >= 0, shared, 6 + np.arange(_MAX_BOX_VERTICES)[None, :])
-    if (~is_box).any():
+        p, c, f = _box_sections(bodies.take(idx), plane_y[idx], grid)
+        polygons[idx, :_MAX_BOX_VERTICES], counts[idx], vfeat[idx, :_MAX_BOX_VERTICES] = p, c, f
+        efeat[idx, :_MAX_BOX_VERTICES] = _box_edge_faces(f, c)
+    if spheres:
         idx = np.flatnonzero(~is_box)
-        p, n = _sphere_sections(bodies.take(idx), plane_y[idx], grid, sphere_segments)
-        polygons[idx, :sphere_segments], counts[idx] = p, n
+        p, c = _sphere_sections(bodies.take(idx), plane_y[idx], grid, sphere_segments)
+        polygons[idx, :sphere_segments], counts[idx] = p, c
         vfeat[idx, :sphere_segments] = np.arange(sphere_segments)
         efeat[idx, :sphere_segments] = np.arange(sphere_segments)
     return Sections(polygons, counts, vfeat, efeat)
 
 
+def _box_edge_faces(feature: I64, counts: I64) -> I64:
+    """The face each polygon edge lies on: the one its two box edges share."""
+    k = np.arange(_MAX_BOX_VERTICES)
+    nxt = feature[np.arange(len(feature))[:, None], np.where(k + 1 < counts[:, None], k + 1, 0)]
+    shared = _SHARED_FACE[feature, nxt]
+    return np.where(shared >= 0, shared, 6 + k)
+
+
 def _box_sections(bodies: Bodies, plane_y: F64, grid: Grid) -> tuple[F64, I64, I64]:
-    local = _SIGNS[None, :, :] * bodies.half[:, None, :]
+    local = _SIGNS * bodies.half[:, None, :]
     corners = bodies.position[:, None, :] + np.einsum("bij,bcj->bci", bodies.rotation, local)
     y = corners[..., 1] - plane_y[:, None]
     above = y >= 0.0
-    ya, yb = y[:, _EDGES[:, 0]], y[:, _EDGES[:, 1]]
-    straddle = above[:, _EDGES[:, 0]] != above[:, _EDGES[:, 1]]
+    ya, yb = y[:, _EA], y[:, _EB]
+    straddle = above[:, _EA] != above[:, _EB]
     t = ya / np.where(straddle, ya - yb, 1.0)
-    qa, qr = corners[:, _EDGES[:, 0], :], corners[:, _EDGES[:, 1], :]
-    points = grid.to_uv((qa + t[..., None] * (qr - qa))[..., [0, 2]])
-    polygons, counts, feature = _sort_ccw(points, straddle)
-    return polygons[:, :_MAX_BOX_VERTICES], counts, feature[:, :_MAX_BOX_VERTICES]
+    qa = corners[:, _EA][..., [0, 2]]
+    qr = corners[:, _EB][..., [0, 2]]
+    points = grid.to_uv(qa + t[..., None] * (qr - qa))
+    return _sort_ccw(points, straddle, exact=bool(np.any(y == 0.0)))
 
 
-def _sort_ccw(points: F64, valid: np.ndarray) -> tuple[F64, I64, I64]:
-    """Order the valid points of each row counter-clockwise about their centroid; drop repeated points."""
+def _sort_ccw(points: F64, valid: np.ndarray, exact: bool) -> tuple[F64, I64, I64]:
+    """The valid points of each row counter-clockwise about their centroid (first 6 columns), their count and
+    the column each came from; with ``exact`` (a box corner on the plane) repeated points are dropped."""
     n = valid.sum(axis=1)
     centre = np.sum(np.where(valid[..., None], points, 0.0), axis=1) / np.maximum(n, 1)[:, None]
     d = points - centre[:, None, :]
     angle = np.where(valid, np.arctan2(d[..., 1], d[..., 0]), np.inf)
-    order = np.argsort(angle, axis=1, kind="stable")
-    polygons = np.take_along_axis(points, order[..., None], axis=1)
-    ok = np.take_along_axis(valid, order, axis=1)
-    # A box vertex lying exactly on the plane gives the same L' from several edges: keep one.
-    prev = np.take_along_axis(polygons, np.where(np.arange(len(order[0]))[None, :] == 0, n[:, None] - 1,
-                                                 np.arange(len(order[0]))[None, :] - 1).clip(0)[..., None], axis=1)
-    repeat = ok & (np.sum((polygons - prev) ** 2, axis=-1) < 1e-20) & (n[:, None] > 1)
-    repeat[:, 0] = False
-    if repeat.any():
-        keep = ok & ~repeat
+    order = np.argsort(angle, axis=1, kind="stable")[:, :_MAX_BOX_VERTICES]
+    rows = np.arange(len(points))[:, None]
+    polygons = points[rows, order]
+    if exact:  # a box vertex on the plane gives the same L' from several edges: keep one
+        k = np.arange(_MAX_BOX_VERTICES)
+        prev = polygons[rows, np.where(k == 0, n[:, None] - 1, k - 1).clip(0)]
+        repeat = (k < n[:, None]) & (np.sum((polygons - prev) ** 2, axis=-1) < 1e-20) & (k > 0)
+        keep = (k < n[:, None]) & ~repeat
         again = np.argsort(~keep, axis=1, kind="stable")
-        polygons = np.take_along_axis(polygons, again[..., None], axis=1)
-        order = np.take_along_axis(order, again, axis=1)
-        n = keep.sum(axis=1)
-    counts = np.where(n >= 3, n, 0)
-    return polygons, counts, order
+        polygons, order, n = polygons[rows, again], order[rows, again], keep.sum(axis=1)
+    return polygons, np.where(n >= 3, n, 0), order
 
 
 def _sphere_sections(bodies: Bodies, plane_y: F64, grid: Grid, segments: int) -> tuple[F64, I64]:
@@ -144,24 +199,19 @@ def _sphere_sections(bodies: Bodies, plane_y: F64, grid: Grid, segments: int) ->
 def nudge(sections: Sections) -> Sections:
     """Move polygon vertices that lie on a grid line (or vertex) slightly inwards (section 2.2.2, figure 2.3), so
     an added point never sits on a grid vertex and a vertex on a grid edge adds no extra point."""
-    p = sections.polygons.copy()
-    valid = np.arange(p.shape[1])[None, :] < sections.counts[:, None]
-    centre = np.sum(np.where(valid[..., None], p, 0.0), axis=1) / np.maximum(sections.counts, 1)[:, None]
-    on = _on_line(p) & valid[..., None]
-    if on.any():
-        towards = centre[:, None, :] - p
-        length = np.linalg.norm(towards, axis=-1, keepdims=True)
-        step = NUDGE * towards / np.where(length > 0.0, length, 1.0)
-        p = np.where(on.any(axis=-1, keepdims=True), p + step, p)
-        on = _on_line(p) & valid[..., None]
-        if on.any():  # moving towards the centre ran along the line: step off it towards the centre's side
-            side = np.where(centre[:, None, :] - p >= 0.0, 1.0, -1.0)
-            p = np.where(on, p + NUDGE * side, p)
-    return Sections(p, sections.counts, sections.vertex_feature, sections.edge_feature)
-
-
-def _on_line(p: F64) -> np.ndarray:
-    return np.abs(p - np.round(p)) < EPS_LINE
+    p = sections.polygons
+    valid = (np.arange(p.shape[1]) < sections.counts[:, None])[..., None]
+    on = (np.abs(p - np.round(p)) < EPS_LINE) & valid
+    if not on.any():
+        return sections
+    centre = sections.centres()[:, None, :]
+    towards = centre - p
+    length = np.linalg.norm(towards, axis=-1, keepdims=True)
+    p = np.where(on.any(axis=-1, keepdims=True), p + NUDGE * towards / np.where(length > 0.0, length, 1.0), p)
+    on = (np.abs(p - np.round(p)) < EPS_LINE) & valid
+    if on.any():  # moving towards the centre ran along the line: step off it towards the centre's side
+        p = np.where(on, p + NUDGE * np.where(centre - p >= 0.0, 1.0, -1.0), p)
+    return sections.with_polygons(p)
 
 
 @dataclass
@@ -177,106 +227,122 @@ class AddedPoints:
     def __len__(self) -> int:
         return len(self.uv)
 
-
-def added_points(sections: Sections, entities: I64, grid: Grid) -> AddedPoints:
-    """The vertices L' and grid-edge crossings M' of every cross-section, ordered along the outline; points off
-    the grid's footprint and the segments touching them are dropped."""
-    for attempt in range(4):
-        points = _outline(sections)
-        if points is not None or attempt == 3:
-            break
-        # An edge of D' passes exactly through a grid vertex: shrink the polygons a hair and cut again.
-        valid = np.arange(sections.polygons.shape[1])[None, :] < sections.counts[:, None]
-        centre = (np.sum(np.where(valid[..., None], sections.polygons, 0.0), axis=1)
-                  / np.maximum(sections.counts, 1)[:, None])
-        shrunk = centre[:, None, :] + (sections.polygons - centre[:, None, :]) * (1.0 - 1e-6 * (attempt + 1))
-        sections = Sections(shrunk, sections.counts, sections.vertex_feature, sections.edge_feature)
-    if points is None:
-        points = _outline(sections, strict=False)
-    uv, kind, feature, line, body, edge, t = points
-    if len(uv) == 0:
+    @staticmethod
+    def empty() -> AddedPoints:
         z = np.zeros(0, np.int64)
         return AddedPoints(np.zeros((0, 2)), np.zeros(0, np.int8), z, z, np.zeros((0, 2), np.int64))
-    order = np.lexsort((t, edge, body))
+
+
+def added_points(sections: Sections, entities: I64, grid: Grid) -> tuple[AddedPoints, Sections]:
+    """The vertices L' and grid-edge crossings M' of every cross-section, ordered along the outline; points off
+    the grid's footprint and the segments touching them are dropped. Returns the points and the sections they
+    were cut from (shrunk a hair in the rare case where an edge of D' passes exactly through a grid vertex)."""
+    points = None
+    for attempt in range(4):
+        points = _outline(sections, strict=attempt < 3)
+        if points is not None:
+            break
+        centre = sections.centres()[:, None, :]
+        sections = sections.with_polygons(centre + (sections.polygons - centre) * (1.0 - 1e-6 * (attempt + 1)))
+    uv, kind, feature, line, body, sort_key = points
+    n = len(uv)
+    if n == 0:
+        return AddedPoints.empty(), sections
+    order = np.argsort(sort_key, kind="stable")
     uv, kind, feature, line, body = uv[order], kind[order], feature[order], line[order], body[order]
-    n = len(body)
-    starts = np.flatnonzero(np.r_[True, body[1:] != body[:-1]])
-    body_start = starts[np.searchsorted(starts, np.arange(n), side="right") - 1]
+    change = np.empty(n + 1, bool)
+    change[0] = change[n] = True
+    np.not_equal(body[1:], body[:-1], out=change[1:n])
+    starts = np.flatnonzero(change[:n])
     nxt = np.arange(1, n + 1)
-    last = np.r_[body[1:] != body[:-1], True]
-    nxt[last] = body_start[last]
+    last = change[1:]
+    nxt[last] = starts
     keep = grid.inside(uv)
-    remap = np.cumsum(keep) - 1
-    seg_ok = keep & keep[nxt]
-    segments = np.stack([remap[np.flatnonzero(seg_ok)], remap[nxt[seg_ok]]], axis=-1).astype(np.int64)
     crossing = (kind < 2).astype(np.int64)
     keys = ((entities[body].astype(np.int64) << 32) | (crossing << 30) | (feature.astype(np.int64) << 22)
             | ((kind == 1).astype(np.int64) << 21) | (crossing * line))
-    return AddedPoints(uv[keep], kind[keep].astype(np.int8), keys[keep], body[keep], segments.reshape(-1, 2))
+    if keep.all():
+        segments = np.stack([np.arange(n), nxt], axis=-1)
+        return AddedPoints(uv, kind, keys, body, segments), sections
+    remap = np.cumsum(keep) - 1
+    seg_ok = keep & keep[nxt]
+    segments = np.stack([remap[seg_ok], remap[nxt[seg_ok]]], axis=-1)
+    return AddedPoints(uv[keep], kind[keep], keys[keep], body[keep], segments), sections
 
 
-def _outline(sections: Sections, strict: bool = True):
-    """Vertices and crossings (unsorted) with their sort keys (body, edge, t); None if a crossing hits a vertex."""
-    a, b, valid = polygon_edges(sections.polygons, sections.counts)
-    eb, ek = np.nonzero(valid)
-    A, Bp = a[eb, ek], b[eb, ek]
+def _outline(sections: Sections, strict: bool):
+    """Vertices and crossings (unsorted) with a sort key ordering them along the outline (body, edge, t);
+    None if, with ``strict``, an edge crosses a grid vertex."""
+    e = sections.edges
+    eb, ek = np.nonzero(e.valid)
+    ax, ay, ex, ey = e.ax[eb, ek], e.ay[eb, ek], e.ex[eb, ek], e.ey[eb, ek]
     efeat = sections.edge_feature[eb, ek]
-    parts = [(A, np.full(len(eb), 2, np.int8), sections.vertex_feature[eb, ek], np.zeros(len(eb), np.int64), eb, ek,
-              np.full(len(eb), -1.0))]
-    for axis in (0, 1):
-        lo = np.floor(np.minimum(A[:, axis], Bp[:, axis])).astype(np.int64)
-        hi = np.floor(np.maximum(A[:, axis], Bp[:, axis])).astype(np.int64)
+    base = (eb * sections.polygons.shape[1] + ek).astype(np.float64) * 2.0  # edge index; t ∈ (0, 1) after it
+    uv = [np.stack([ax, ay], -1)]
+    kinds = [np.full(len(eb), 2, np.int8)]
+    features = [sections.vertex_feature[eb, ek]]
+    lines = [np.zeros(len(eb), np.int64)]
+    bodies = [eb]
+    keys = [base]
+    for axis, (a, d, a2, d2) in enumerate(((ax, ex, ay, ey), (ay, ey, ax, ex))):
+        lo = np.floor(np.minimum(a, a + d)).astype(np.int64)
+        hi = np.floor(np.maximum(a, a + d)).astype(np.int64)
         run, line = ranges(lo + 1, hi - lo)
-        t = (line - A[run, axis]) / (Bp[run, axis] - A[run, axis])
-        other = A[run, 1 - axis] + t * (Bp[run, 1 - axis] - A[run, 1 - axis])
+        t = (line - a[run]) / d[run]
+        other = a2[run] + t * d2[run]
         if strict and axis == 0 and np.any(np.abs(other - np.round(other)) < EPS_LINE):
             return None
-        uv = np.empty((len(run), 2))
-        uv[:, axis], uv[:, 1 - axis] = line, other
-        parts.append((uv, np.full(len(run), axis, np.int8), efeat[run], line, eb[run], ek[run], t))
-    return tuple(np.concatenate(column) for column in zip(*parts))
+        point = np.empty((len(run), 2))
+        point[:, axis], point[:, 1 - axis] = line, other
+        uv.append(point)
+        kinds.append(np.full(len(run), axis, np.int8))
+        features.append(efeat[run])
+        lines.append(line)
+        bodies.append(eb[run])
+        keys.append(base[run] + t)
+    return tuple(np.concatenate(c) for c in (uv, kinds, features, lines, bodies, keys))
 
 
 # ---------------------------------------------------------------------------------------- wave generation
-def outline_impulse(points: AddedPoints, sections: Sections, previous_polygons: F64, previous_counts: I64,
-                    has_previous: np.ndarray, grid: Grid, alpha: float) -> tuple[F64, F64, np.ndarray, np.ndarray]:
+def outline_impulse(points: AddedPoints, sections: Sections, previous: Sections, has_previous: np.ndarray,
+                    grid: Grid, alpha: float) -> tuple[F64, F64, np.ndarray, np.ndarray]:
     """±α·d(t) for every added point (eq. 2.5–2.7).
 
     N_c(t − 1), the added point one step earlier, is the point of the previous cross-section D'(t − 1) nearest to
     N_c(t): so d(t) is how far the outline moved there, whatever moved it (the body gliding, turning, or bobbing
     with sloped sides). N_c rises by α·d(t) when N_c(t − 1) lies inside D'(t) (the body pushed that water aside)
-    and sinks by α·d(t) when N_c(t) lay inside D'(t − 1) (the body left that space). Bodies without a
-    cross-section at t − 1 make no wave this step. Returns (change of height, d(t) in metres, raised, lowered).
+    and sinks by α·d(t) when N_c(t) lay inside D'(t − 1) (the body left that space). The outline itself counts as
+    inside (a corner gliding along a side was on D'(t) at t − 1). The rises and falls of one body balance: the
+    outline's points are not evenly spaced, so the raw ±α·d(t) would create or remove water; the body's mean
+    change is taken off all of its points. Bodies without a cross-section at t − 1 make no wave this step.
+    Returns (change of height, d(t) in metres, raised, lowered).
     """
     if len(points) == 0:
         empty = np.zeros(0)
         return empty, empty, np.zeros(0, bool), np.zeros(0, bool)
     bi = points.body
-    old = has_previous[bi] & (previous_counts[bi] >= 3)
-    back = nearest_on_outline(points.uv, previous_polygons[bi], previous_counts[bi])
-    back = np.where(old[:, None], back, points.uv)
-    d = np.hypot(*(points.uv - back).T) * grid.h  # eq. 2.5
-    # The outline itself counts as inside (a corner gliding along a side was on D'(t) at t − 1).
-    raised = old & inside_polygons(back, sections.polygons[bi], sections.counts[bi], -_ON_OUTLINE)
-    lowered = old & inside_polygons(points.uv, previous_polygons[bi], previous_counts[bi], -_ON_OUTLINE)
+    old = has_previous[bi] & (previous.counts[bi] >= 3)
+    back = np.where(old[:, None], nearest_on_outline(points.uv, bi, previous.edges), points.uv)
+    d = np.hypot(points.uv[:, 0] - back[:, 0], points.uv[:, 1] - back[:, 1]) * grid.h  # eq. 2.5
+    raised = old & sections.edges.inside(back, bi, -_ON_OUTLINE)  # N_c(t − 1) inside D'(t)
+    lowered = old & previous.edges.inside(points.uv, bi, -_ON_OUTLINE)  # N_c(t) inside D'(t − 1)
     change = alpha * d * (raised.astype(np.float64) - lowered.astype(np.float64))  # eq. 2.6 / 2.7
-    # Rises and falls of one body balance (the outline's points are not evenly spaced, so the raw ±α·d would
-    # create or remove water): the body's mean change is taken off all of its points.
-    count = np.bincount(bi, minlength=len(has_previous))
-    mean = np.bincount(bi, change, len(has_previous)) / np.maximum(count, 1)
+    nb = len(has_previous)
+    mean = np.bincount(bi, change, nb) / np.maximum(np.bincount(bi, minlength=nb), 1)
     return change - mean[bi], d, raised, lowered
 
 
-def nearest_on_outline(points: F64, polygons: F64, counts: I64) -> F64:
-    """The point of each polygon's outline (P, V, 2) nearest to ``points[p]`` (P, 2)."""
-    a, b, valid = polygon_edges(polygons, counts)
-    e = b - a
-    length2 = np.sum(e * e, axis=-1)
-    t = np.clip(np.sum((points[:, None, :] - a) * e, axis=-1) / np.where(length2 > 0.0, length2, 1.0), 0.0, 1.0)
-    foot = a + t[..., None] * e
-    dist2 = np.where(valid, np.sum((foot - points[:, None, :]) ** 2, axis=-1), np.inf)
+def nearest_on_outline(points: F64, body: I64, edges: Edges) -> F64:
+    """The point of polygon ``body[p]``'s outline nearest to ``points[p]``."""
+    ax, ay, ex, ey = edges.ax[body], edges.ay[body], edges.ex[body], edges.ey[body]
+    px, py = points[:, :1], points[:, 1:]
+    length2 = ex * ex + ey * ey
+    t = np.clip(((px - ax) * ex + (py - ay) * ey) / np.where(length2 > 0.0, length2, 1.0), 0.0, 1.0)
+    fx, fy = ax + t * ex, ay + t * ey
+    dist2 = np.where(edges.valid[body], (fx - px) ** 2 + (fy - py) ** 2, np.inf)
     best = np.argmin(dist2, axis=1)
-    return foot[np.arange(len(points)), best]
+    rows = np.arange(len(points))
+    return np.stack([fx[rows, best], fy[rows, best]], axis=-1)
 
 
 # ------------------------------------------------------------------------------------------- coupling
@@ -284,60 +350,57 @@ def solid_vertices(sections: Sections, grid: Grid) -> tuple[I64, I64]:
     """Grid vertices strictly inside some cross-section: (flat vertex index, body index). In the outline method
     they are inside the body, so the water there is not simulated and waves reflect at the outline."""
     p, counts = sections.polygons, sections.counts
-    valid = (np.arange(p.shape[1])[None, :] < counts[:, None])[..., None]
-    lo = np.ceil(np.min(np.where(valid, p, np.inf), axis=1))
-    hi = np.floor(np.max(np.where(valid, p, -np.inf), axis=1))
+    valid = (np.arange(p.shape[1]) < counts[:, None])[..., None]
     cut = counts >= 3
-    lo = np.where(cut[:, None], np.maximum(lo, 0), 0).astype(np.int64)
-    hi = np.where(cut[:, None], np.minimum(hi, [grid.nx - 1, grid.nz - 1]), -1).astype(np.int64)
+    lo = np.where(cut[:, None], np.maximum(np.ceil(np.min(np.where(valid, p, np.inf), axis=1)), 0), 0)
+    hi = np.where(cut[:, None], np.minimum(np.floor(np.max(np.where(valid, p, -np.inf), axis=1)),
+                                           [grid.nx - 1, grid.nz - 1]), -1)
+    lo, hi = lo.astype(np.int64), hi.astype(np.int64)
     width = np.maximum(hi[:, 0] - lo[:, 0] + 1, 0)
     height = np.maximum(hi[:, 1] - lo[:, 1] + 1, 0)
     body, offset = ranges(np.zeros(len(counts), np.int64), width * height)
     if len(body) == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
     dv, du = np.divmod(offset, width[body])
-    uv = np.stack([lo[body, 0] + du, lo[body, 1] + dv], axis=-1).astype(np.float64)
-    inside = inside_polygons(uv, p[body], counts[body])
-    flat = (uv[inside, 1] * grid.nx + uv[inside, 0]).astype(np.int64)
-    return flat, body[inside]
+    i, j = lo[body, 0] + du, lo[body, 1] + dv
+    inside = sections.edges.inside(np.stack([i, j], -1).astype(np.float64), body, 1e-9)
+    return j[inside] * grid.nx + i[inside], body[inside]
 
 
 def coupling_pairs(points: AddedPoints, fluid: np.ndarray, grid: Grid) -> tuple[I64, I64, F64, I64, I64, F64]:
     """Neighbours within radius h for eq. 2.11 / 2.12, with weights r_k / h = 1 − distance / h.
 
-    Returns (grid vertex, added point, weight) for the pairs between the grid and the added points (grid
-    vertices inside a body excluded), and (point, point, weight) for the pairs of added points of one body, both
-    directions.
+    Returns (grid vertex, added point, weight) for the pairs between the grid and the added points (vertices
+    inside a body excluded), and (point, point, weight) for the pairs of added points, both directions. Points
+    within h of each other lie in the same or neighbouring squares: they are found by sorting the points by
+    square and looking up the 3 × 3 squares around each.
     """
     m = len(points)
     if m == 0:
         z = np.zeros(0, np.int64)
         return z, z, np.zeros(0), z, z, np.zeros(0)
-    base = np.floor(points.uv).astype(np.int64)
-    corner = base[:, None, :] + np.array([[0, 0], [1, 0], [0, 1], [1, 1]])[None, :, :]
-    dist = np.linalg.norm(corner - points.uv[:, None, :], axis=-1)
-    ok = ((dist < 1.0) & (corner[..., 0] >= 0) & (corner[..., 0] < grid.nx) & (corner[..., 1] >= 0)
-          & (corner[..., 1] < grid.nz))
-    flat = np.where(ok, corner[..., 1] * grid.nx + corner[..., 0], 0)
+    uv = points.uv
+    base = np.floor(uv).astype(np.int64)
+    ci = base[:, 0:1] + np.array([[0, 1, 0, 1]])
+    cj = base[:, 1:2] + np.array([[0, 0, 1, 1]])
+    dist = np.hypot(ci - uv[:, :1], cj - uv[:, 1:])
+    ok = (dist < 1.0) & (ci >= 0) & (ci < grid.nx) & (cj >= 0) & (cj < grid.nz)
+    flat = np.where(ok, cj * grid.nx + ci, 0)
     ok &= fluid.ravel()[flat]
     p_idx, c_idx = np.nonzero(ok)
     g = flat[p_idx, c_idx]
     w = 1.0 - dist[p_idx, c_idx]
-    # Pairs of added points of the same body (padded per body: bodies hold a few dozen points each).
-    body = points.body
-    starts = np.flatnonzero(np.r_[True, body[1:] != body[:-1]])
-    sizes = np.diff(np.r_[starts, m])
-    slot = np.arange(m) - np.repeat(starts, sizes)
-    group = np.repeat(np.arange(len(starts)), sizes)
-    table = -np.ones((len(starts), int(sizes.max())), np.int64)
-    table[group, slot] = np.arange(m)
-    first, second = table[:, :, None], table[:, None, :]
-    uv = points.uv
-    real = (first >= 0) & (second >= 0) & (first != second)
-    diff = uv[np.maximum(first, 0)] - uv[np.maximum(second, 0)]
-    dd = np.hypot(diff[..., 0], diff[..., 1])
-    close = real & (dd < 1.0)
-    gi, ai, bi = np.nonzero(close)
-    n1 = table[gi, ai]
-    n2 = table[gi, bi]
-    return g, p_idx.astype(np.int64), w, n1, n2, 1.0 - dd[gi, ai, bi]
+    stride = grid.nx + 3
+    cell = (base[:, 1] + 1) * stride + base[:, 0] + 1
+    order = np.argsort(cell, kind="stable")
+    sorted_cell = cell[order]
+    wanted = (cell[:, None] + _NEIGHBOUR_CELLS[:, 1] * stride + _NEIGHBOUR_CELLS[:, 0]).ravel()
+    lo = np.searchsorted(sorted_cell, wanted, "left")
+    hi = np.searchsorted(sorted_cell, wanted, "right")
+    run, pos = ranges(lo, hi - lo)
+    first = run // len(_NEIGHBOUR_CELLS)
+    second = order[pos]
+    diff = uv[first] - uv[second]
+    dd = np.hypot(diff[:, 0], diff[:, 1])
+    close = (dd < 1.0) & (first != second)
+    return g, p_idx, w, first[close], second[close], 1.0 - dd[close]

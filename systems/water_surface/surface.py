@@ -56,6 +56,13 @@ def plane_levels(z: F64, solid: np.ndarray, bodies: Bodies, grid: Grid) -> F64:
     return levels
 
 
+def _scratch(state: WaterState) -> F64:
+    """A work array of the grid's shape kept with the state (not part of it)."""
+    if state.scratch is None or state.scratch.shape != state.heights.shape:
+        state.scratch = np.empty_like(state.heights)
+    return state.scratch
+
+
 def _water_mean(field: F64, solid: I64 | None) -> float:
     """Mean height of the vertices that are water (all but the flat indices ``solid``)."""
     if solid is None:
@@ -72,7 +79,7 @@ def _near(bodies: Bodies, grid: Grid, state: WaterState, depth: float) -> np.nda
     return over & (bodies.position[:, 1] - vertical <= top + 1e-9) & (bodies.position[:, 1] + vertical >= grid.y0 - depth)
 
 
-def _previous(state: WaterState, bodies: Bodies, width: int) -> tuple[F64, I64, np.ndarray]:
+def _previous(state: WaterState, bodies: Bodies, width: int) -> tuple[Sections, np.ndarray]:
     """Each body's cross-section at t − 1 (padded to ``width``) and whether it had one."""
     polygons = np.zeros((len(bodies), width, 2))
     counts = np.zeros(len(bodies), np.int64)
@@ -86,7 +93,7 @@ def _previous(state: WaterState, bodies: Bodies, width: int) -> tuple[F64, I64, 
         w = min(width, state.polygons.shape[1])
         polygons[has, :w] = state.polygons[src[has], :w]
         counts[has] = np.minimum(state.polygon_counts[src[has]], w)
-    return polygons, counts, has
+    return Sections(polygons, counts, counts, counts), has
 
 
 def _carried(state: WaterState, points: AddedPoints, z: F64, zp: F64) -> tuple[F64, F64]:
@@ -126,8 +133,10 @@ def step_water(state: WaterState, cfg: WaterSurface, grid: Grid, bodies: Bodies,
                rng: np.random.Generator | None = None) -> StepReport:
     """Advance ``state`` by one fixed step ``dt`` with ``bodies`` at their new transforms."""
     k = courant_k(cfg.wave_speed, cfg.spacing, dt)
-    if state.degree is None or state.degree.shape != state.heights.shape:
+    if state.degree is None or state.degree.shape != state.heights.shape or state.coefficient_k != k:
         state.degree = free_degree(*state.heights.shape)
+        state.coefficient = 2.0 - k * state.degree
+        state.coefficient_k = k
     volume = _water_mean(state.heights, np.flatnonzero(state.solid.ravel()) if state.solid.any() else None)
     _disturb(state, cfg, grid, dt, rng)
     z, zp = state.heights, state.previous
@@ -143,20 +152,24 @@ def step_water(state: WaterState, cfg: WaterSurface, grid: Grid, bodies: Bodies,
         new, new_points, points, previous_points = _grid_step(state, cfg, grid, bodies, plane_y, k, report)
     # Keep the water's volume: drops, impacts, points coming and going and vertices changing between water and
     # body move the mean level a little; shift it back (heights at t and t + 1 alike: no velocity).
-    shift = volume - _water_mean(new, report.solid if len(report.solid) else None)
-    new += shift
-    z += shift
-    new_points = new_points + shift
-    previous_points = previous_points + shift
-    if cfg.damping < 1.0:  # section 2.3.2, about the mean level of the water
-        new = volume + cfg.damping * (new - volume)
-        new_points = volume + cfg.damping * (new_points - volume)
+    mean = _water_mean(new, report.solid if len(report.solid) else None)
+    shift = volume - mean
+    if shift != 0.0:
+        z += shift
+        previous_points = previous_points + shift
+    if cfg.damping < 1.0:  # section 2.3.2, about the mean level of the water: new ← V + d·(new + shift − V)
+        new *= cfg.damping
+        new += volume - cfg.damping * mean
+        new_points = volume + cfg.damping * (new_points - mean)
+    elif shift != 0.0:
+        new += shift
+        new_points = new_points + shift
     state.previous, state.heights = z, new
     state.point_keys, state.point_uv, state.point_kind = points.keys, points.uv, points.kind
     state.point_heights, state.point_previous, state.segments = new_points, previous_points, points.segments
     state.body_entities, state.body_positions = bodies.entities.copy(), bodies.position.copy()
     state.body_rotations = bodies.rotation.copy()
-    state.polygons, state.polygon_counts = sections.polygons, sections.counts
+    state.polygons, state.polygon_counts = report.sections.polygons, report.sections.counts
     state.last_raised = report.change
     report.points = points
     return report
@@ -165,17 +178,17 @@ def step_water(state: WaterState, cfg: WaterSurface, grid: Grid, bodies: Bodies,
 def _outline_step(state, cfg, grid, bodies, sections, levels, plane_y, k, report):
     """The paper's method: added points on the outline make and reflect the waves."""
     z, zp = state.heights, state.previous
-    points = added_points(sections, bodies.entities, grid)
+    points, sections = added_points(sections, bodies.entities, grid)
+    report.sections = sections
     heights, previous = _carried(state, points, z, zp)
-    prev_polygons, prev_counts, has = _previous(state, bodies, sections.polygons.shape[1])
-    change, _, raised, lowered = outline_impulse(points, sections, prev_polygons, prev_counts, has, grid,
-                                                 cfg.outline_constant)
+    before, has = _previous(state, bodies, sections.polygons.shape[1])
+    change, _, raised, lowered = outline_impulse(points, sections, before, has, grid, cfg.outline_constant)
     solid, solid_body = solid_vertices(sections, grid)
     state.solid = np.zeros(z.shape, bool)
     state.solid.ravel()[solid] = True
-    fluid = ~state.solid if len(solid) else None
     pairs = coupling_pairs(points, ~state.solid, grid)
-    new, new_points = propagate(z, zp, k, state.degree, fluid, pairs, heights, previous)
+    new, new_points = propagate(z, zp, k, state.coefficient, state.degree, solid, pairs, heights, previous,
+                                _scratch(state), reuse=True)
     # eq. 2.6 / 2.7: a displacement of the point (its height history moves with it, so no velocity is injected)
     new_points = new_points + change
     heights = heights + change
@@ -202,8 +215,6 @@ def _grid_step(state, cfg, grid, bodies, plane_y, k, report):
     zp += change
     state.column_depth = column
     state.solid = np.zeros(z.shape, bool)
-    new, _ = propagate(z, zp, k, state.degree)
+    new, _ = propagate(z, zp, k, state.coefficient, state.degree, scratch=_scratch(state), reuse=True)
     report.column_change = change
-    empty = AddedPoints(np.zeros((0, 2)), np.zeros(0, np.int8), np.zeros(0, np.int64), np.zeros(0, np.int64),
-                        np.zeros((0, 2), np.int64))
-    return new, np.zeros(0), empty, np.zeros(0)
+    return new, np.zeros(0), AddedPoints.empty(), np.zeros(0)

@@ -34,10 +34,14 @@ def courant_k(wave_speed: float, spacing: float, dt: float) -> float:
     return (wave_speed * dt / spacing) ** 2
 
 
-def neighbour_sum(field: F64) -> F64:
+def neighbour_sum(field: F64, out: F64 | None = None) -> F64:
     """Sum of the 4 grid neighbours of every vertex; neighbours beyond the border count 0."""
-    s = np.zeros_like(field)
-    s[:, 1:] += field[:, :-1]
+    s = np.zeros_like(field) if out is None else out
+    if out is not None:
+        s[:, 0] = 0.0
+        s[:, 1:] = field[:, :-1]
+    else:
+        s[:, 1:] += field[:, :-1]
     s[:, :-1] += field[:, 1:]
     s[1:, :] += field[:-1, :]
     s[:-1, :] += field[1:, :]
@@ -49,37 +53,54 @@ def free_degree(nz: int, nx: int) -> F64:
     return neighbour_sum(np.ones((nz, nx)))
 
 
-def propagate(z: F64, zp: F64, k: float, degree: F64, fluid: np.ndarray | None = None,
-              pairs: tuple = (), points: F64 | None = None, points_prev: F64 | None = None
-              ) -> tuple[F64, F64]:
+def propagate(z: F64, zp: F64, k: float, coefficient: F64, degree: F64, solid: I64 | None = None,
+              pairs: tuple = (), points: F64 | None = None, points_prev: F64 | None = None,
+              scratch: F64 | None = None, reuse: bool = False) -> tuple[F64, F64]:
     """One step of eq. 2.8–2.12: (grid heights at t+1, added-point heights at t+1).
 
-    ``fluid`` (bool, nz × nx) marks vertices that are water (None: all); ``degree`` is :func:`free_degree` (used
-    when every vertex is water). ``pairs`` = (grid vertex, point, weight, point, point, weight) from
-    ``outline.coupling_pairs``.
+    ``coefficient`` = 2 − k·``degree`` with ``degree`` = :func:`free_degree` (the open grid's neighbour counts);
+    ``solid`` holds the flat indices of vertices inside bodies, which their neighbours do not count; ``pairs`` =
+    (grid vertex, point, weight, point, point, weight) from ``outline.coupling_pairs``. The regular update runs
+    on the whole grid; the vertices next to a body or to added points are then updated again with their own
+    neighbours (eq. 2.11). ``scratch`` (the grid's shape) saves an allocation; with ``reuse`` the result is
+    written over ``zp``, which the caller no longer needs.
     """
-    if fluid is None:
-        s = neighbour_sum(z)
-        d = degree
-    else:
-        f = fluid.astype(np.float64)
-        s = neighbour_sum(z * f)
-        d = neighbour_sum(f)
-    lap = s - d * z
-    new = 2.0 * z - zp + k * lap
-    if points is None or len(points) == 0:
-        return new, np.zeros(0)
-    g, p, w, n1, n2, w2 = pairs
-    m = len(points)
-    zf, zpf, newf = z.ravel(), zp.ravel(), new.ravel()
-    if len(g):  # eq. 2.11 at the grid vertices with added neighbours
-        touched, inverse = np.unique(g, return_inverse=True)
-        s_t = s.ravel()[touched] + np.bincount(inverse, w * points[p], len(touched))
-        d_t = d.ravel()[touched] + np.bincount(inverse, w, len(touched))
-        k_t = np.minimum(k, 2.0 / d_t)
+    nz, nx = z.shape
+    zf, zpf = z.ravel(), zp.ravel()
+    index, ds, dd = [], [], []
+    if solid is not None and len(solid):  # neighbours lose the vertices inside bodies (reflection)
+        i = solid % nx
+        for offset, ok in ((1, i < nx - 1), (-1, i > 0), (nx, solid < (nz - 1) * nx), (-nx, solid >= nx)):
+            index.append(solid[ok] + offset)
+            ds.append(-zf[solid[ok]])
+            dd.append(np.full(int(ok.sum()), -1.0))
+    has_points = points is not None and len(points) > 0
+    if has_points:
+        g, p, w, n1, n2, w2 = pairs
+        index.append(g)
+        ds.append(w * points[p])
+        dd.append(w)
+    s = neighbour_sum(z, scratch)
+    special = None
+    if index:  # eq. 2.11 at the vertices next to bodies or added points (computed before zp may be overwritten)
+        index = np.concatenate(index)
+        touched, inverse = np.unique(index, return_inverse=True)
+        s_t = s.ravel()[touched] + np.bincount(inverse, np.concatenate(ds), len(touched))
+        d_t = degree.ravel()[touched] + np.bincount(inverse, np.concatenate(dd), len(touched))
+        lonely = d_t <= 1e-12
+        k_t = np.minimum(k, 2.0 / np.where(lonely, 1.0, d_t))  # k·D ≤ 2: stable with the extra neighbours
         z_t = zf[touched]
-        newf[touched] = 2.0 * z_t - zpf[touched] + k_t * (s_t - d_t * z_t)
-    # eq. 2.12 at the added points
+        special = np.where(lonely, z_t, 2.0 * z_t - zpf[touched] + k_t * (s_t - d_t * z_t))
+    s *= k
+    s -= zp
+    new = zp if reuse else np.empty_like(z)
+    np.multiply(coefficient, z, out=new)
+    new += s  # eq. 2.8: z(t+1) = (2 − n·k)·z + k·Σ z_nb − z(t−1)
+    if special is not None:
+        new.ravel()[touched] = special
+    if not has_points:
+        return new, np.zeros(0)
+    m = len(points)  # eq. 2.12 at the added points
     s_n = np.bincount(p, w * zf[g], m) + np.bincount(n1, w2 * points[n2], m)
     d_n = np.bincount(p, w, m) + np.bincount(n1, w2, m)
     isolated = d_n <= 0.0

@@ -51,12 +51,9 @@ preset = "energy_wave/{preset}"
 
 
 def scene_app(tmp_path, preset: str, extra: str = "") -> App:
-    path = ROOT / "configs" / "scenes" / f"_test_energy_wave_{tmp_path.name}.toml"
+    path = tmp_path / "energy_wave_scene.toml"
     path.write_text(SCENE.format(preset=preset, extra=extra), encoding="utf-8")
-    try:
-        return App(path)
-    finally:
-        path.unlink()
+    return App(path, configs_root=ROOT / "configs")
 
 
 def _render(tmp_path, preset, steps=70, size=(160, 120), extra=""):
@@ -188,3 +185,12 @@ def test_gpu_trails_follow_eq_3_7():
     np.testing.assert_allclose(sizes[0], 0.2 * trail_sizes(8, 0.4), atol=1e-5)
     centres, sizes = _expand_on_gpu(0, 1, [_record(p1, hit=p0), _record(p0)], size=0.2)
     np.testing.assert_allclose(centres[:, 0], [p1, p0], atol=1e-6)  # single sprites sit on the particle
+
+
+def test_rendering_does_not_change_the_state(tmp_path):
+    rendered = scene_app(tmp_path, "reference")
+    plain = scene_app(tmp_path, "reference")
+    rendered.step(30)
+    render_app(rendered, width=48, height=32, frames=5)
+    plain.step(35)
+    assert rendered.state_hash() == plain.state_hash()

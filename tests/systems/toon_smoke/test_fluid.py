@@ -145,7 +145,8 @@ def test_expansion_source_pushes_smoke_outwards():
     div = fluid.divergence(state.u, state.v, state.w, geo.h)
     x, y, z = geo.local_centres()
     src = cfg.sources[0]
-    inside = (x - src.position[0]) ** 2 + (y - src.position[1]) ** 2 + (z - src.position[2]) ** 2 < (0.5 * src.radius) ** 2
+    dist2 = (x - src.position[0]) ** 2 + (y - src.position[1]) ** 2 + (z - src.position[2]) ** 2
+    inside = dist2 < (0.5 * src.radius) ** 2
     target = 3.0 * src.radial_speed / src.radius
     assert np.median(div[inside]) == pytest.approx(target, rel=0.01)
     assert state.divergence_after <= cfg.pressure_tolerance * state.divergence_before

@@ -16,7 +16,7 @@ GRID = make_grid(26, 0.4)
 
 def _mesh(bodies, segments=16):
     s = nudge(cross_sections(bodies, np.zeros(len(bodies)), GRID, segments))
-    pts = added_points(s, bodies.entities, GRID)
+    pts, _ = added_points(s, bodies.entities, GRID)
     return pts, retriangulate(26, 26, pts.uv, pts.kind, pts.segments)
 
 

@@ -43,7 +43,7 @@ def test_a_corner_down_box_gives_a_hexagon_and_a_sphere_its_circle():
 def test_added_points_are_the_vertices_and_the_grid_edge_crossings():
     # A box 2.0 × 1.2 m with corners off the grid: it spans u ∈ (7.75, 12.75), v ∈ (10.5, 13.5)
     s = _section(box(0.1, 0.2, half=(1.0, 0.5, 0.6)))
-    pts = added_points(s, np.array([7]), GRID)
+    pts, _ = added_points(s, np.array([7]), GRID)
     uv = pts.uv
     assert np.sum(pts.kind == 2) == 4  # the polygon's vertices L'
     on_u, on_v = pts.kind == 0, pts.kind == 1
@@ -63,7 +63,7 @@ def test_points_on_grid_lines_are_nudged_inwards():
     assert np.all(np.abs(p - np.round(p)) > EPS_LINE)  # off every grid line now
     assert np.all(np.abs(p - raw.polygons[0, :4]) < 1e-3)  # moved only slightly ...
     assert inside_polygons(p, np.repeat(raw.polygons, 4, 0), np.repeat(raw.counts, 4), margin=0.0).all()  # inwards
-    pts = added_points(s, np.array([7]), GRID)
+    pts, _ = added_points(s, np.array([7]), GRID)
     corner = np.abs(pts.uv - np.round(pts.uv)).max(axis=1) < 1e-6
     assert not corner.any()  # no added point sits on a grid vertex
     assert len(pts.uv) == 4 + 2 * 5 + 2 * 3  # and no extra points: corners + crossings of the inner lines
@@ -72,9 +72,8 @@ def test_points_on_grid_lines_are_nudged_inwards():
 def test_eq_2_6_and_2_7_raise_the_front_and_lower_the_back():
     before = _section(box(-0.03, 0.1))
     after = _section(box(0.0, 0.1))
-    pts = added_points(after, np.array([7]), GRID)
-    change, d, raised, lowered = outline_impulse(pts, after, before.polygons, before.counts, np.array([True]),
-                                                 GRID, alpha=2.0)
+    pts, after = added_points(after, np.array([7]), GRID)
+    change, d, raised, lowered = outline_impulse(pts, after, before, np.array([True]), GRID, alpha=2.0)
     u = pts.uv[:, 0]
     vertex = pts.kind == 2
     front = u > (1.0 + 5.0) / 0.4 - 1e-3  # the front face x = 1.0 (u = (x + 5) / h)
