@@ -4,8 +4,9 @@ Per frame the renderer:
 1. calls ``feature.extract(world)`` once (render-extract stage): copy what the passes need out of the
    simulation state (numpy copies, never references to arrays the simulation keeps mutating);
 2. for every view (main camera, minimap / top view, ...), calls ``feature.add_passes(graph, view, data)``
-   with features ordered by ``phase`` (OPAQUE, TRANSPARENT, OVERLAY) and then by registration order;
-3. compiles and executes the render graph, then tone-maps each view and composites them.
+   with features ordered by ``phase`` (OPAQUE, SKY, TRANSPARENT, OVERLAY) and then by registration order;
+3. compiles and executes the render graph; each view is tone-mapped straight into its rectangle of the
+   window image, and OVERLAY features draw over that.
 
 A pass that draws into a view declares it in its setup callback, which also orders it::
 
@@ -35,9 +36,10 @@ if TYPE_CHECKING:
     from engine.render.renderer import Renderer
     from engine.world import World
 
-OPAQUE = 0
-TRANSPARENT = 1
-OVERLAY = 2
+OPAQUE = 0  # writes colour and depth
+SKY = 1  # the sky fills what the opaque passes left empty (depth test at the far plane)
+TRANSPARENT = 2  # reads depth, blends colour
+OVERLAY = 3  # drawn once over the composited window image (HUD)
 
 
 @dataclass

@@ -15,7 +15,7 @@ import numpy as np
 
 from engine.builtin import Terrain
 from engine.render.components import Hud, MeshConfig
-from engine.render.feature import OPAQUE, OVERLAY, RenderFeature, View
+from engine.render.feature import OPAQUE, OVERLAY, SKY, RenderFeature, View
 from engine.render.graph import TextureDesc
 from engine.spatial import Transform
 
@@ -59,18 +59,24 @@ def opaque_setup(view: View):
 
 # ---------------------------------------------------------------------------- sky
 class SkyFeature(RenderFeature):
+    """Sky gradient and sun, drawn after the opaque passes only where the depth is still at the far plane."""
+
     name = "sky"
-    phase = OPAQUE
+    phase = SKY
 
     def add_passes(self, graph, view: View, data) -> None:
         def setup(b):
             view.color = b.write(view.color)
+            b.read(view.depth)
 
         def execute(pc):
             prog = self._program()
-            fbo = self.renderer.framebuffer(pc.get(view.color))
+            fbo = self.renderer.framebuffer(pc.get(view.color), pc.get(view.depth))
             fbo.use()
-            self.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
+            fbo.depth_mask = False
+            self.ctx.disable(moderngl.BLEND)
+            self.ctx.enable(moderngl.DEPTH_TEST)
+            self.ctx.depth_func = "<="
             s = self.renderer.settings
             inv = np.linalg.inv(view.view_proj.astype(np.float64)).astype(np.float32)
             set_uniforms(prog, inv_view_proj=inv.T.copy(), camera_pos=tuple(view.camera_pos),
@@ -78,12 +84,14 @@ class SkyFeature(RenderFeature):
                          sun_dir=tuple(self.renderer.sun_direction), sun_color=tuple(self.renderer.sun_color),
                          ortho=view.ortho, camera_forward=tuple(view.camera_forward))
             self._vao.render(moderngl.TRIANGLES, vertices=3)
+            self.ctx.depth_func = "<"
+            fbo.depth_mask = True
 
         graph.add_pass(f"sky.{view.name}", setup, execute)
 
     def _program(self) -> moderngl.Program:
         if not hasattr(self, "_vao"):
-            prog = self.renderer.program((SHADERS / "fullscreen.vert").read_text(), (SHADERS / "sky.frag").read_text())
+            prog = self.renderer.program((SHADERS / "sky.vert").read_text(), (SHADERS / "sky.frag").read_text())
             self._vao = self.ctx.vertex_array(prog, [])
             self._prog = prog
         return self._prog
@@ -300,32 +308,23 @@ def _fullscreen(renderer: Renderer, frag: str) -> moderngl.VertexArray:
     return vao
 
 
-def tonemap_execute(renderer: Renderer, pc, view: View, ldr_handle) -> None:
-    ctx = renderer.ctx
-    fbo = renderer.framebuffer(pc.get(ldr_handle))
-    fbo.use()
-    ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
-    vao = _fullscreen(renderer, "tonemap.frag")
-    pc.get(view.color).use(0)
-    set_uniforms(vao.program, hdr=0, exposure=renderer.settings.exposure)
-    vao.render(moderngl.TRIANGLES, vertices=3)
-
-
-def composite_execute(renderer: Renderer, pc, final_handle, ldr_views) -> None:
+def present_execute(renderer: Renderer, pc, view: View, final_handle, first: bool) -> None:
+    """Tone-map a view's HDR colour into its rectangle of the window image (with a frame when partial)."""
     ctx = renderer.ctx
     fbo = renderer.framebuffer(pc.get(final_handle))
     fbo.use()
     ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
-    fbo.clear(0.0, 0.0, 0.0, 1.0)
-    vao = _fullscreen(renderer, "blit.frag")
-    for view, handles in ldr_views:
-        x, y, w, h = view.extra["rect"]
-        if (w, h) != (renderer.width, renderer.height):
-            fbo.clear(*view.extra["border"], 1.0, viewport=(x - 2, y - 2, w + 4, h + 4))
-        fbo.viewport = (x, y, w, h)
-        pc.get(handles["ldr"]).use(0)
-        set_uniforms(vao.program, image=0)
-        vao.render(moderngl.TRIANGLES, vertices=3)
+    x, y, w, h = view.extra["rect"]
+    full = (x, y, w, h) == (0, 0, renderer.width, renderer.height)
+    if first and not full:
+        fbo.clear(0.0, 0.0, 0.0, 1.0)
+    if not full:
+        fbo.clear(*view.extra["border"], 1.0, viewport=(x - 2, y - 2, w + 4, h + 4))
+    fbo.viewport = (x, y, w, h)
+    vao = _fullscreen(renderer, "tonemap.frag")
+    pc.get(view.color).use(0)
+    set_uniforms(vao.program, hdr=0, exposure=renderer.settings.exposure)
+    vao.render(moderngl.TRIANGLES, vertices=3)
     fbo.viewport = (0, 0, renderer.width, renderer.height)
 
 

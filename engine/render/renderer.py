@@ -21,7 +21,7 @@ import moderngl
 import numpy as np
 
 from engine.render.components import Camera, Hud, look_at, projection, view_matrix, viewport_pixels
-from engine.render.feature import OPAQUE, OVERLAY, TRANSPARENT, RenderFeature, View
+from engine.render.feature import OVERLAY, RenderFeature, View
 from engine.render.graph import RenderGraph, ResourcePool, TextureDesc
 from engine.spatial import Transform
 
@@ -242,15 +242,15 @@ class Renderer:
         graph.reset()
         timed = _TimedGraph(graph, self.timer)
         final = graph.import_resource("final", self._final, TextureDesc(self.width, self.height, "rgba8"))
-        ldr_views = []
         for view in self.views:
             self._declare_view_targets(timed, view)
             for index, feature in self._ordered:
-                if feature.phase in (OPAQUE, TRANSPARENT):
+                if feature.phase < OVERLAY:
                     feature.add_passes(timed, view, data[index])
-            ldr_views.append(self._declare_tonemap(timed, view))
+        for i, view in enumerate(self.views):
+            final = self._declare_present(timed, final, view, first=i == 0)
         screen = replace(self.views[0], name="screen", width=self.width, height=self.height,
-                         color=self._declare_composite(timed, final, ldr_views), depth=None, extra={})
+                         color=final, depth=None, extra={})
         for index, feature in self._ordered:
             if feature.phase == OVERLAY:
                 feature.add_passes(timed, screen, data[index])
@@ -280,30 +280,17 @@ class Renderer:
 
         graph.add_pass(f"clear.{view.name}", setup, execute)
 
-    def _declare_tonemap(self, graph, view: View):
-        from engine.render.passes import tonemap_execute
-
-        handles = {}
-
-        def setup(b):
-            b.read(view.color)
-            handles["ldr"] = b.write(b.create(f"{view.name}.ldr", TextureDesc(view.width, view.height, "rgba8")))
-
-        graph.add_pass(f"tonemap.{view.name}", setup, lambda pc: tonemap_execute(self, pc, view, handles["ldr"]))
-        return view, handles
-
-    def _declare_composite(self, graph, final, ldr_views):
-        from engine.render.passes import composite_execute
+    def _declare_present(self, graph, final, view: View, first: bool):
+        """Tone-map ``view`` straight into its rectangle of the window image (no intermediate copy)."""
+        from engine.render.passes import present_execute
 
         out = {}
 
         def setup(b):
-            for _, handles in ldr_views:
-                b.read(handles["ldr"])
+            b.read(view.color)
             out["final"] = b.write(final)
 
-        graph.add_pass("composite", setup, lambda pc: composite_execute(self, pc, out["final"], ldr_views),
-                       side_effect=True)
+        graph.add_pass(f"present.{view.name}", setup, lambda pc: present_execute(self, pc, view, out["final"], first))
         return out["final"]
 
     # ----------------------------------------------------------------- pictures

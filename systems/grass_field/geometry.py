@@ -287,20 +287,18 @@ def _line_indices(start: int, lines: int, nodes: int) -> np.ndarray:
 def _mesh_vertices(p: LevelParts, dims: _Dims) -> np.ndarray:
     """One variant's vertices in the shared layout of ``dims``."""
     out = []
-    stem = _pad_rows(p.stem, dims.stem, 0)
-    stem_r = _pad_rows(p.stem_radius, dims.stem, 0)
-    if dims.sides:
-        out.append(_ring_vertices(stem[None], stem_r[None], np.array([[1.0, 0.0, 0.0]]), dims.sides).reshape(-1, 8))
+    if dims.sides:  # rings are built on the real nodes, then padded with copies of the last ring
+        rings = _ring_vertices(p.stem[None], p.stem_radius[None], np.array([[1.0, 0.0, 0.0]]), dims.sides)
+        out.append(_pad_rows(rings, dims.stem, 1).reshape(-1, 8))
     else:
-        out.append(_vertices(stem, 0.0, [0.0, 1.0, 0.0], KIND_LINE))
-    side = _pad_branches(p.side, dims.branches)
-    side[len(p.side):] = [1.0, 0.0, 0.0]
+        out.append(_vertices(_pad_rows(p.stem, dims.stem, 0), 0.0, [0.0, 1.0, 0.0], KIND_LINE))
+    side = _pad_branches(p.side, dims.branches)  # missing branches collapse onto the base
     if dims.lower:
-        lower = _pad_branches(_pad_rows(p.lower, dims.lower, 1), dims.branches)
-        lower_r = _pad_branches(_pad_rows(p.lower_radius, dims.lower, 1), dims.branches)
         if dims.sides:
-            out.append(_ring_vertices(lower, lower_r, side, dims.sides).reshape(-1, 8))
+            rings = _pad_rows(_ring_vertices(p.lower, p.lower_radius, p.side, dims.sides), dims.lower, 1)
+            out.append(_pad_branches(rings, dims.branches).reshape(-1, 8))
         else:
+            lower = _pad_branches(_pad_rows(p.lower, dims.lower, 1), dims.branches)
             out.append(_vertices(lower, 0.0, [0.0, 1.0, 0.0], KIND_LINE).reshape(-1, 8))
     leaf = _pad_branches(_pad_rows(p.leaf, dims.leaf, 1), dims.branches)
     width = _pad_rows(p.leaf_width, dims.leaf, 0)

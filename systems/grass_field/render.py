@@ -106,13 +106,17 @@ class FieldGpu:
         self.cell_capacity = max(1, placed.cell_count)
         self.cell_tex = _data_texture(ctx, np.zeros((self.cell_capacity, 1), np.int32), dtype="i4")
         self._cell_upload = np.zeros(self.cell_tex.width * self.cell_tex.height, np.int32)
-        self.meshes: dict[tuple[int, str], tuple[moderngl.Texture, int, int]] = {}
+        # per level: one vertex texture for all variants, one shared index buffer per primitive type
+        self.mesh_tex: dict[int, tuple[moderngl.Texture, int]] = {}
+        self.meshes: dict[tuple[int, str], tuple[moderngl.VertexArray, moderngl.Buffer, int, int]] = {}
         for mesh in data.meshes:
+            self.mesh_tex[mesh.level] = (_data_texture(ctx, mesh.vertices.reshape(-1, 4)), mesh.vertices.shape[1])
             for kind, mode, _ in MESH_KINDS:
-                arr = getattr(mesh, kind)
-                if arr.shape[1]:
-                    self.meshes[(mesh.level, kind)] = (_data_texture(ctx, arr.reshape(-1, 4)), arr.shape[1], mode)
-        self.plant_vao = ctx.vertex_array(self.plant_prog, [])
+                index = getattr(mesh, kind)
+                if len(index):
+                    ibo = ctx.buffer(np.ascontiguousarray(index, dtype=np.int32).tobytes())
+                    vao = ctx.vertex_array(self.plant_prog, [], index_buffer=ibo, index_element_size=4)
+                    self.meshes[(mesh.level, kind)] = (vao, ibo, len(index), mode)
         # level 4: the LOD cache
         self.frame = tile_frame(cfg.cell_size, data.plant_reach, data.plant_height,
                                 np.radians(cfg.impostor_elevation_deg))
@@ -164,17 +168,19 @@ class FieldGpu:
                     leaf_tip_color=tuple(cfg.leaf_tip_color))
 
     def _draw_level(self, level: int, offset: int, cells: int) -> None:
+        """All plants of ``cells`` listed cells (from ``offset`` in the cell list) at ``level``: one instanced,
+        indexed draw per primitive type."""
         if cells <= 0:
             return
+        tex, verts = self.mesh_tex[level]
+        tex.use(0)
+        set_uniforms(self.plant_prog, mesh_verts=verts, cell_offset=offset)
         for kind, _, _ in MESH_KINDS:
             entry = self.meshes.get((level, kind))
-            if entry is None:
-                continue
-            tex, verts, mode = entry
-            tex.use(0)
-            set_uniforms(self.plant_prog, mesh_verts=verts, cell_offset=offset)
-            self.plant_vao.render(mode, vertices=verts, instances=cells * self.cfg.plants_per_cell)
-            self.draw_calls += 1
+            if entry is not None:
+                vao, _, count, mode = entry
+                vao.render(mode, vertices=count, instances=cells * self.cfg.plants_per_cell)
+                self.draw_calls += 1
 
     # ------------------------------------------------------------------------------- level 4 (cache)
     def _cache_extra(self) -> dict[str, Any]:
@@ -461,10 +467,11 @@ class FieldGpu:
         if self._released:
             return
         self._released = True
-        objects = [self.plant_tex, self.cell_tex, self.plant_vao, self.impostor_buf, self.impostor_vao, self.bounds_tex,
+        objects = [self.plant_tex, self.cell_tex, self.impostor_buf, self.impostor_vao, self.bounds_tex,
                    self.band_buf, self.band_vao, self.atlas, self.band_tex, self.band_fbo,
                    getattr(self, "band_depth", None)]
-        objects += [entry[0] for entry in self.meshes.values()]
+        objects += [tex for tex, _ in self.mesh_tex.values()]
+        objects += [obj for vao, ibo, _, _ in self.meshes.values() for obj in (vao, ibo)]
         for obj in objects:
             if obj is not None:
                 obj.release()

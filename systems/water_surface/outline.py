@@ -348,23 +348,34 @@ def nearest_on_outline(points: F64, body: I64, edges: Edges) -> F64:
 # ------------------------------------------------------------------------------------------- coupling
 def solid_vertices(sections: Sections, grid: Grid) -> tuple[I64, I64]:
     """Grid vertices strictly inside some cross-section: (flat vertex index, body index). In the outline method
-    they are inside the body, so the water there is not simulated and waves reflect at the outline."""
+    they are inside the body, so the water there is not simulated and waves reflect at the outline.
+
+    Scanline fill: every grid row v = j through a polygon meets its outline at two points (it is convex, and its
+    vertices are off the grid lines); the vertices strictly between them are inside.
+    """
     p, counts = sections.polygons, sections.counts
-    valid = (np.arange(p.shape[1]) < counts[:, None])[..., None]
+    valid = np.arange(p.shape[1]) < counts[:, None]
+    v = np.where(valid, p[..., 1], np.nan)
     cut = counts >= 3
-    lo = np.where(cut[:, None], np.maximum(np.ceil(np.min(np.where(valid, p, np.inf), axis=1)), 0), 0)
-    hi = np.where(cut[:, None], np.minimum(np.floor(np.max(np.where(valid, p, -np.inf), axis=1)),
-                                           [grid.nx - 1, grid.nz - 1]), -1)
+    lo = np.where(cut, np.maximum(np.ceil(np.nanmin(np.where(cut[:, None], v, 0.0), axis=1)), 0), 0)
+    hi = np.where(cut, np.minimum(np.floor(np.nanmax(np.where(cut[:, None], v, 0.0), axis=1)), grid.nz - 1), -1)
     lo, hi = lo.astype(np.int64), hi.astype(np.int64)
-    width = np.maximum(hi[:, 0] - lo[:, 0] + 1, 0)
-    height = np.maximum(hi[:, 1] - lo[:, 1] + 1, 0)
-    body, offset = ranges(np.zeros(len(counts), np.int64), width * height)
+    body, row = ranges(lo, np.maximum(hi - lo + 1, 0))
     if len(body) == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    dv, du = np.divmod(offset, width[body])
-    i, j = lo[body, 0] + du, lo[body, 1] + dv
-    inside = sections.edges.inside(np.stack([i, j], -1).astype(np.float64), body, 1e-9)
-    return j[inside] * grid.nx + i[inside], body[inside]
+    e = sections.edges
+    ay, ey, ax, ex = e.ay[body], e.ey[body], e.ax[body], e.ex[body]
+    t = (row[:, None] - ay) / np.where(ey != 0.0, ey, np.inf)
+    crosses = e.valid[body] & (t >= 0.0) & (t < 1.0) & (ey != 0.0)
+    u = ax + t * ex
+    left = np.min(np.where(crosses, u, np.inf), axis=1)
+    right = np.max(np.where(crosses, u, -np.inf), axis=1)
+    first = np.maximum(np.floor(left + 1e-9).astype(np.int64) + 1, 0)
+    last = np.minimum(np.ceil(right - 1e-9).astype(np.int64) - 1, grid.nx - 1)
+    ok = np.isfinite(left) & np.isfinite(right)
+    first, last = np.where(ok, first, 0), np.where(ok, last, -1)
+    run, i = ranges(first, np.maximum(last - first + 1, 0))
+    return row[run] * grid.nx + i, body[run]
 
 
 def coupling_pairs(points: AddedPoints, fluid: np.ndarray, grid: Grid) -> tuple[I64, I64, F64, I64, I64, F64]:

@@ -56,7 +56,7 @@ class WaterFeature(RenderFeature):
                         vertices=np.concatenate([positions, normals], axis=1).astype(np.float32),
                         indices=mesh.triangles.astype(np.uint32).ravel(),
                         shallow=tuple(cfg.shallow_color), deep=tuple(cfg.deep_color), clarity=cfg.clarity,
-                        floor=grid.y0 - cfg.depth, wire=None)
+                        floor=grid.y0 - cfg.depth, rest=grid.y0, wire=None)
             if cfg.wireframe:
                 item["wire"] = wire_arrays(positions, mesh).astype(np.float32)
             out.append(item)
@@ -106,7 +106,7 @@ class WaterFeature(RenderFeature):
             for item in data:
                 buf = self._upload(item)
                 set_uniforms(water, shallow_color=item["shallow"], deep_color=item["deep"], clarity=item["clarity"],
-                             floor_y=item["floor"])
+                             floor_y=item["floor"], rest_y=item["rest"])
                 buf.vao.render(moderngl.TRIANGLES, vertices=len(item["indices"]))
             self.ctx.disable(moderngl.BLEND)
             wire = self.renderer.load_program(SHADERS, "wire")

@@ -1,7 +1,7 @@
 #version 330
 #include "common.glsl"
 // Levels 0-3 (table 1), instanced: one instance per plant of the cells listed for this level.
-// Instance i draws plant (i % plants_per_cell) of cell cell_tex[cell_offset + i / plants_per_cell]; the vertex
+// Instance i draws plant (i % plants_per_cell) of cell cell_tex[cell_offset + i / plants_per_cell]; the indexed vertex
 // comes from the plant's variant: mesh_tex[variant * mesh_verts + gl_VertexID] (2 texels per vertex).
 uniform mat4 view_proj;
 uniform sampler2D mesh_tex;

@@ -1,13 +1,14 @@
 #version 330
 #include "lit.glsl"
-// Water: sky reflection weighted by Schlick's Fresnel term (F0 = 0.02, water's index 1.33), sun glint, and a
-// body colour tinted from shallow to deep by the light's path through the water down to the pool floor
-// (Beer-Lambert, 1 - exp(-path / clarity)). Output is premultiplied: the scene behind shows through by
-// (1 - F) * exp(-path / clarity).
+// Water: sky reflection weighted by Schlick's Fresnel term (F0 = 0.02, water's index 1.33) with a sun glint, over
+// a body colour tinted from shallow to deep by the light's path through the water down to the pool floor
+// (Beer-Lambert: 1 - exp(-path / clarity)) and lit by the height field's normal; crests scatter a little more
+// light than troughs. Output is premultiplied: the scene behind shows through by (1 - F)·exp(-path / clarity).
 uniform vec3 shallow_color;
 uniform vec3 deep_color;
 uniform float clarity;
 uniform float floor_y;
+uniform float rest_y;
 in vec3 v_pos;
 in vec3 v_normal;
 out vec4 frag;
@@ -24,14 +25,18 @@ void main() {
     float cos_v = clamp(dot(n, v), 0.0, 1.0);
     float fresnel = F0 + (1.0 - F0) * pow(1.0 - cos_v, 5.0);
     vec3 r = reflect(-v, n);
-    vec3 reflected = sky(r) + sun_color * pow(max(dot(r, sun_dir), 0.0), 300.0) * 6.0;
+    float glint = max(dot(r, sun_dir), 0.0);
+    vec3 reflected = sky(r) + sun_color * (pow(glint, 400.0) * 8.0 + pow(glint, 40.0) * 0.5);
     float depth = max(v_pos.y - floor_y, 0.0);
     float path = depth / max(v.y, 0.2) + depth;  // down to the floor and back up
     float absorbed = 1.0 - exp(-path / clarity);
-    float light = ambient + max(dot(n, sun_dir), 0.0) * 0.6;
-    vec3 body = mix(shallow_color, deep_color, absorbed) * light;
-    vec3 color = (1.0 - fresnel) * absorbed * body + fresnel * reflected;
-    float alpha = 1.0 - (1.0 - fresnel) * (1.0 - absorbed);
+    float crest = clamp((v_pos.y - rest_y) * 12.0, -1.0, 1.0);
+    vec3 tint = mix(shallow_color, deep_color, clamp(absorbed - 0.3 * crest, 0.0, 1.0));
+    float light = 0.5 * ambient + 0.9 * max(dot(n, sun_dir), 0.0) * max(sun_color.g, 0.0);
+    vec3 body = tint * light * (1.0 + 0.35 * crest);
+    vec3 color = (1.0 - fresnel) * absorbed * body + fresnel * reflected
+               + (1.0 - fresnel) * sun_color * pow(glint, 40.0) * 0.15;
+    float alpha = clamp(1.0 - (1.0 - fresnel) * (1.0 - absorbed), 0.0, 1.0);
     float f = 1.0 - exp(-length(camera_pos - v_pos) * fog_density);
     color = mix(color, sky_horizon * alpha, clamp(f, 0.0, 1.0));
     frag = vec4(color, alpha);

@@ -83,4 +83,4 @@ def test_cli_screenshot_and_graph_dot(tmp_path):
     assert "per-pass time" in res.stdout and len(res.stdout.strip().splitlines()[-1]) == 32
     dot = subprocess.run([sys.executable, "-m", "engine", "graph", SCENE, "--dot"], capture_output=True, text=True)
     assert dot.returncode == 0, dot.stderr
-    assert dot.stdout.startswith("digraph") and "tonemap.view0" in dot.stdout and "composite" in dot.stdout
+    assert dot.stdout.startswith("digraph") and "present.view0" in dot.stdout and "sky.view0" in dot.stdout

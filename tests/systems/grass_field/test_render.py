@@ -28,7 +28,7 @@ def _feature(app):
 
 
 def test_golden_near(tmp_path):
-    app = _app(tmp_path, SMALL + "grid_x = 6\ngrid_z = 6\n", _camera((0.0, 28.0, 120.0), pitch=-10.0))
+    app = _app(tmp_path, SMALL + "grid_x = 6\ngrid_z = 6\n", _camera((0.0, 24.0, 40.0), pitch=-22.0))
     image = render_app(app, 160, 120, frames=1)
     assert_golden(image, "grass_field_near")
 
@@ -56,6 +56,9 @@ def test_lod_cache_bakes_each_view_once_and_reuses_it(tmp_path):
             app.step(1)
             app.render_frame()
         assert gpu.baked_views == 36  # reused across frames
+        app.restore(app.snapshot())  # restored copies of the state draw the same field: no rebake
+        app.render_frame()
+        assert next(iter(_feature(app).fields.values())) is gpu and gpu.baked_views == 36
         assert gpu.draw_calls <= 8  # instanced: a handful of draw calls, not one per cell or plant
         assert gpu.disk_path is not None and gpu.disk_path.is_file()
     finally:
