@@ -299,10 +299,12 @@ class MeshFeature(RenderFeature):
 
 # ----------------------------------------------------------- tone map, composite
 def _fullscreen(renderer: Renderer, frag: str) -> moderngl.VertexArray:
+    from engine.render.renderer import shader_source
+
     cache = renderer.__dict__.setdefault("_fullscreen_vaos", {})
     vao = cache.get(frag)
     if vao is None:
-        prog = renderer.program((SHADERS / "fullscreen.vert").read_text(), (SHADERS / frag).read_text())
+        prog = renderer.program(shader_source(SHADERS / "fullscreen.vert"), shader_source(SHADERS / frag))
         vao = renderer.ctx.vertex_array(prog, [])
         cache[frag] = vao
     return vao

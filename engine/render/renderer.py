@@ -144,8 +144,8 @@ class Renderer:
         directory = Path(directory)
         geom = directory / f"{name}.geom"
         try:
-            return self.program(_source(directory / f"{name}.vert"), _source(directory / f"{name}.frag"),
-                                _source(geom) if geom.exists() else None)
+            return self.program(shader_source(directory / f"{name}.vert"), shader_source(directory / f"{name}.frag"),
+                                shader_source(geom) if geom.exists() else None)
         except moderngl.Error as exc:
             raise RuntimeError(f"shader '{name}' in {directory} failed to compile:\n{exc}") from None
 
@@ -323,7 +323,7 @@ class Renderer:
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.M)
 
 
-def _source(path: Path, depth: int = 0) -> str:
+def shader_source(path: Path, depth: int = 0) -> str:
     """Shader text with ``#include "file"`` lines expanded (own folder first, then the engine's shaders)."""
     text = path.read_text(encoding="utf-8")
 
@@ -331,7 +331,7 @@ def _source(path: Path, depth: int = 0) -> str:
         for folder in (path.parent, SHADER_DIR):
             candidate = folder / match.group(1)
             if candidate.is_file() and depth < 8:
-                return _source(candidate, depth + 1)
+                return shader_source(candidate, depth + 1)
         raise FileNotFoundError(f"{path}: #include \"{match.group(1)}\" not found in {path.parent} or {SHADER_DIR}")
 
     return _INCLUDE.sub(expand, text)

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from engine.spatial import quat_mul, quat_normalize, quat_to_matrix
+from engine.spatial import quat_mul, quat_normalize
 from systems.water_surface.geometry import BOX, F64, SPHERE, Grid, bilinear, bilinear_with_slope
 
 __all__ = ["BodyArrays", "apply_impulses", "inertia", "integrate", "pool_contacts", "water_forces"]
@@ -31,6 +31,22 @@ _BOX_N = 4
 _SPHERE_N = 5
 _MAX_SUBSTEPS = 8
 _OMEGA_DT = 0.3
+
+
+def quat_to_matrix(q: F64) -> F64:
+    """Rotation matrices (B, 3, 3) of unit quaternions (B, 4) (w, x, y, z); same as engine.spatial's, for many."""
+    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    m = np.empty((len(q), 3, 3))
+    m[:, 0, 0] = 1.0 - 2.0 * (y * y + z * z)
+    m[:, 0, 1] = 2.0 * (x * y - w * z)
+    m[:, 0, 2] = 2.0 * (x * z + w * y)
+    m[:, 1, 0] = 2.0 * (x * y + w * z)
+    m[:, 1, 1] = 1.0 - 2.0 * (x * x + z * z)
+    m[:, 1, 2] = 2.0 * (y * z - w * x)
+    m[:, 2, 0] = 2.0 * (x * z - w * y)
+    m[:, 2, 1] = 2.0 * (y * z + w * x)
+    m[:, 2, 2] = 1.0 - 2.0 * (x * x + y * y)
+    return m
 
 
 def _lattice(n: int) -> F64:
@@ -193,6 +209,10 @@ def pool_contacts(bodies: BodyArrays, grid: Grid, floor: float, active: np.ndarr
     normals = _PLANE_NORMALS
     x_hi, z_hi = grid.x0 + (grid.nx - 1) * grid.h, grid.z0 + (grid.nz - 1) * grid.h
     offsets = np.array([floor, grid.x0, -x_hi, grid.z0, -z_hi])
+    reach = np.where(bodies.shapes == SPHERE, bodies.radius, np.linalg.norm(bodies.half, axis=1))
+    clear = bodies.position @ normals.T - reach[:, None] > offsets  # (B, P): a plane no corner can reach
+    if np.all(clear | ~active[:, None]):
+        return
     corners = np.einsum("bij,bcj->bci", rot, _CORNERS[None] * bodies.half[:, None, :])  # (B, 8, 3)
     support = -bodies.radius[:, None, None] * normals[None, :, :]  # (B, P, 3) sphere
     r = np.where((bodies.shapes == SPHERE)[:, None, None, None], support[:, :, None, :],

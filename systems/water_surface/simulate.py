@@ -18,9 +18,9 @@ from components.water_surface import (RigidBody, RigidBodyState, WaterState, Wat
 from engine.collider import Collider
 from engine.events import EventReader
 from engine.impacts import Impact
-from engine.spatial import Transform, quat_to_matrix
+from engine.spatial import Transform
 from engine.world import World
-from systems.water_surface.bodies import BodyArrays, apply_impulses, integrate, pool_contacts
+from systems.water_surface.bodies import BodyArrays, apply_impulses, integrate, pool_contacts, quat_to_matrix
 from systems.water_surface.geometry import BOX, SPHERE, Bodies, Grid, bilinear, empty_bodies
 from systems.water_surface.surface import step_water
 

@@ -1,0 +1,18 @@
+// The engine's display transform and its inverse, shared by the tone-mapping pass and by effects that
+// want a colour to reach the screen unchanged (cel shading, UI-like colours in the 3D scene).
+// Forward: exposure, the ACES fit of Narkowicz (2015) y = (2.51x² + 0.03x) / (2.43x² + 0.59x + 0.14),
+// then gamma 1/2.2.  The inverse solves the quadratic for x.
+uniform float exposure;
+vec3 hdr_to_display(vec3 hdr) {
+    vec3 x = hdr * exposure;
+    vec3 y = clamp((x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14), 0.0, 1.0);
+    return pow(y, vec3(1.0 / 2.2));
+}
+vec3 display_to_hdr(vec3 display) {
+    vec3 y = clamp(pow(clamp(display, 0.0, 1.0), vec3(2.2)), 0.0, 0.99);
+    vec3 a = 2.51 - 2.43 * y;
+    vec3 b = 0.03 - 0.59 * y;
+    vec3 c = -0.14 * y;
+    vec3 x = (-b + sqrt(b * b - 4.0 * a * c)) / (2.0 * a);
+    return x / max(exposure, 1e-4);
+}
