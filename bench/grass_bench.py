@@ -222,7 +222,7 @@ def main(argv: list[str] | None = None) -> int:
         best = None
         for grid in (40, 64, 96, 128, 160):
             cfg, state, data = field(grid, 40)
-            r = bench.run(cfg, data, state, (5,), path, repeats=1)[0]
+            r = bench.run(cfg, data, state, (5,), path)[0]
             print(f"  grid {grid:>3} ({grid * grid * 40:>7} plants): {r['fps']:6.1f} fps, {r['prims']:8.0f} prims",
                   flush=True)
             if r["fps"] >= 30.0:

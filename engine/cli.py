@@ -148,7 +148,10 @@ def schema_command(out: Path) -> int:
         target = out / f"{name}.schema.json"
         target.write_text(json.dumps(schema, indent=2, sort_keys=True) + "\n", encoding="utf-8")
         written.append(target)
-    scene = SceneConfig.model_json_schema()
-    (out / "scene.schema.json").write_text(json.dumps(scene, indent=2, sort_keys=True) + "\n", encoding="utf-8")
-    print(f"wrote {len(written) + 1} schema file(s) to {out}")
+    from engine.scene import EntityConfig
+
+    for name, model in (("scene", SceneConfig), ("entity", EntityConfig)):
+        text = json.dumps(model.model_json_schema(), indent=2, sort_keys=True) + "\n"
+        (out / f"{name}.schema.json").write_text(text, encoding="utf-8")
+    print(f"wrote {len(written) + 2} schema file(s) to {out}")
     return 0

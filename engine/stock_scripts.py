@@ -105,4 +105,39 @@ class Spawner(Script):
             return []
 
 
-SCRIPTS = [Spin, Bob, WasdMover, Spawner]
+@script("lifetime")
+class Lifetime(Script):
+    """Despawns its entity after a number of seconds (effects that play once: puffs, bursts)."""
+
+    class Params(ConfigModel):
+        seconds: float = Field(3.0, gt=0.0, le=3600.0, description="Seconds before the entity is removed.")
+
+    def on_start(self) -> None:
+        self.left = self.params.seconds
+
+    def on_update(self, dt: float) -> None:
+        self.left -= dt
+        if self.left <= 0.0:
+            self.ctx.despawn()
+
+
+@script("snap_to_ground")
+class SnapToGround(Script):
+    """Places the entity on the terrain once, at start (targets and props in hand-made scenes)."""
+
+    class Params(ConfigModel):
+        offset: float = Field(0.0, ge=-1000.0, le=1000.0, description="Metres above the ground.")
+
+    def on_start(self) -> None:
+        from engine.builtin import Terrain
+
+        t = self.ctx.get(Transform)
+        for entity, (terrain,) in self.ctx.query(Terrain):
+            origin = self.ctx.world.try_get(entity, Transform)
+            o = origin.position if origin is not None else np.zeros(3)
+            ground = terrain.field.height_at(np.array([t.position[0] - o[0]]), np.array([t.position[2] - o[2]]))[0]
+            t.position[1] = float(ground + o[1] + self.params.offset)
+            return
+
+
+SCRIPTS = [Spin, Bob, WasdMover, Spawner, Lifetime, SnapToGround]

@@ -44,7 +44,8 @@ def lighting_uniforms(renderer: Renderer, view: View) -> dict[str, Any]:
     s = renderer.settings
     return dict(view_proj=view.view_proj.T.copy(), sun_dir=tuple(renderer.sun_direction),
                 sun_color=tuple(renderer.sun_color), ambient=renderer.ambient, sky_top=tuple(s.sky_top),
-                sky_horizon=tuple(s.sky_horizon), camera_pos=tuple(view.camera_pos), fog_density=s.fog_density)
+                sky_horizon=tuple(s.sky_horizon), camera_pos=tuple(view.camera_pos),
+                fog_density=0.0 if view.ortho else s.fog_density)  # no aerial haze in map-like top views
 
 
 def opaque_setup(view: View):
@@ -379,7 +380,7 @@ class HudFeature(RenderFeature):
         if hud is not None:
             lines = list(hud.lines)
             if hud.show_fps:
-                lines.append(f"FPS {self.renderer.fps:5.1f}")
+                lines.append(f"FPS {self.renderer.fps:5.1f}" if self.renderer.fps else "FPS   --")
             if lines:
                 items.append(("top_left", tuple(lines), 16))
             if hud.center:

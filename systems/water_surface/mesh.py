@@ -197,10 +197,9 @@ def _cycles(nxt: I64) -> I64:
 def _bridge_holes(nx, uv, head, nxt, r, k, segments, cells, local, ring_cell, ring_vertex, ring_next):
     """Join each outline that lies wholly inside one square (a hole) to that square's corner (i + 1, j + 1)."""
     rep = _cycles(nxt)
-    backward = np.arange(r + k, r + 2 * k)
-    reps = np.unique(rep[backward])
-    holes = [q for q in reps if not np.any(rep[:r] == q) and q >= r + k]
-    if not holes:
+    reps = np.unique(rep[r + k:])  # faces walked along an outline backwards ...
+    holes = reps[(reps >= r + k) & ~np.isin(reps, rep[:r])]  # ... that touch no square side: holes
+    if len(holes) == 0:
         return head, nxt
     head, nxt = list(head), list(nxt)
     for q in holes:  # one per small body
