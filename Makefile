@@ -3,7 +3,6 @@ PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
-SCENE ?= configs/scenes/sandbox.toml
 
 .PHONY: demo test bench setup gl-deps clean
 
@@ -20,15 +19,14 @@ gl-deps:
 	@sh tools/check_gl_deps.sh
 
 demo: setup
-	$(PY) -m engine run $(SCENE) $(DEMO_ARGS)
+	$(PY) -m game_demo $(DEMO_ARGS)
 
 test: setup
 	$(PY) -m engine validate configs/
 	$(PY) -m pytest
 
 bench: setup
-	$(PY) bench/ecs_bench.py
-	$(PY) bench/render_bench.py
+	@for f in bench/*_bench.py; do echo "== $$f"; $(PY) $$f || exit 1; done
 
 clean:
 	rm -rf $(VENV) out .pytest_cache

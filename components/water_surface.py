@@ -169,11 +169,10 @@ class WaterState:
     point_uv: F64 = field(default_factory=lambda: _empty(0, 2))
     point_heights: F64 = field(default_factory=lambda: _empty(0))  # N_z(t)
     point_previous: F64 = field(default_factory=lambda: _empty(0))  # N_z(t − 1)
-    point_kind: NDArray[np.int8] = field(default_factory=lambda: _empty(0, dtype=np.int8))  # 0 u-line, 1 v-line, 2 vertex
+    point_kind: NDArray[np.int8] = field(default_factory=lambda: _empty(0, dtype=np.int8))  # 0/1 on u/v line, 2 L'
     segments: NDArray[np.int64] = field(default_factory=lambda: _empty(0, 2, dtype=np.int64))  # outline, CCW
     body_entities: NDArray[np.int64] = field(default_factory=lambda: _empty(0, dtype=np.int64))
-    body_positions: F64 = field(default_factory=lambda: _empty(0, 3))
-    body_rotations: F64 = field(default_factory=lambda: _empty(0, 3, 3))
+    body_heights: F64 = field(default_factory=lambda: _empty(0))  # body centre above its plane S' at t − 1
     polygons: F64 = field(default_factory=lambda: _empty(0, 0, 2))  # (B, V, 2) cross-sections D' at t, grid units
     polygon_counts: NDArray[np.int64] = field(default_factory=lambda: _empty(0, dtype=np.int64))
     column_depth: F64 | None = None  # (nz, nx) submerged body depth per vertex at t ('grid' method)

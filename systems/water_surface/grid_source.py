@@ -38,7 +38,8 @@ def column_depths(bodies: Bodies, plane_y: F64, grid: Grid) -> tuple[I64, F64]:
     uv = vertex[:, None, :] + np.stack([su.ravel(), sv.ravel()], axis=-1)[None, :, :]
     xz = grid.to_xz(uv)
     b = body[:, None]
-    depth = np.where((bodies.shapes == BOX)[b], _box_depth(bodies, b, xz, plane_y), _sphere_depth(bodies, b, xz, plane_y))
+    is_box = (bodies.shapes == BOX)[b]
+    depth = np.where(is_box, _box_depth(bodies, b, xz, plane_y), _sphere_depth(bodies, b, xz, plane_y))
     flat = vertex[:, 1] * grid.nx + vertex[:, 0]
     touched, inverse = np.unique(flat, return_inverse=True)
     return touched, np.bincount(inverse, depth.mean(axis=1), len(touched))

@@ -9,7 +9,8 @@
    order along the outline, with the outline segments between consecutive points.
 4. Wave generation (eq. 2.5–2.7): d(t) is how far the outline moved at N_c in one step; N_c rises by α·d(t)
    when its position at t − 1 lies inside the cross-section at t, and sinks by α·d(t) when its position at t
-   lay inside the cross-section at t − 1.
+   lay inside the cross-section at t − 1. An addition for vertical motion (``heave_impulse``): the volume a body
+   sinks into the water is pushed out along its outline.
 5. Coupling with the grid (eq. 2.11, 2.12): pairs of points within radius h with weights r_k / h = 1 − |PN| / h,
    and the grid vertices inside the cross-section, which become a reflecting obstacle.
 """
@@ -22,7 +23,7 @@ import numpy as np
 
 from systems.water_surface.geometry import BOX, EPS_LINE, F64, I64, NUDGE, Bodies, Grid, ranges
 
-__all__ = ["AddedPoints", "Edges", "Sections", "added_points", "coupling_pairs", "cross_sections",
+__all__ = ["AddedPoints", "Edges", "Sections", "added_points", "coupling_pairs", "cross_sections", "heave_impulse",
            "nearest_on_outline", "nudge", "outline_impulse", "solid_vertices"]
 
 # Box corners c = (sx, sy, sz) ∈ {−1, 1}³ and its 12 edges (corner pairs that differ along one axis).
@@ -50,7 +51,7 @@ def _shared_faces() -> np.ndarray:
 _SHARED_FACE = _shared_faces()
 _MAX_BOX_VERTICES = 6  # a plane cuts a box in at most a hexagon
 _ON_OUTLINE = 3.0 * NUDGE  # grid units: this close to the outline counts as on it in eq. 2.6 / 2.7 (> the nudge)
-_NEIGHBOUR_CELLS = np.array([(di, dj) for dj in (-1, 0, 1) for di in (-1, 0, 1)], np.int64)
+_HALF_CELLS = np.array([(0, 0), (1, 0), (-1, 1), (0, 1), (1, 1)], np.int64)  # the own square first
 
 
 @dataclass
@@ -332,6 +333,20 @@ def outline_impulse(points: AddedPoints, sections: Sections, previous: Sections,
     return change - mean[bi], d, raised, lowered
 
 
+def heave_impulse(sections: Sections, sink: F64, alpha: float) -> F64:
+    """Rise of every added point of body b when it sank by ``sink[b]`` metres relative to the water plane.
+
+    The paper only moves water aside horizontally (eq. 2.6, 2.7), so a wall-sided body plunging or bobbing
+    straight down would make no wave. Here the volume it adds under the water, A·sink, is pushed out as a rise
+    α·A·sink / (L·h) along its outline (A the cross-section's area, L its perimeter: a band one square wide);
+    a rising body draws water in the same way.
+    """
+    e = sections.edges
+    area = 0.5 * np.sum(np.where(e.valid, e.ax * e.ey - e.ay * e.ex, 0.0), axis=1)  # grid units²
+    perimeter = np.sum(np.where(e.valid, np.hypot(e.ex, e.ey), 0.0), axis=1)  # grid units
+    return alpha * sink * area / np.where(perimeter > 0.0, perimeter, 1.0)
+
+
 def nearest_on_outline(points: F64, body: I64, edges: Edges) -> F64:
     """The point of polygon ``body[p]``'s outline nearest to ``points[p]``."""
     ax, ay, ex, ey = edges.ax[body], edges.ay[body], edges.ex[body], edges.ey[body]
@@ -384,7 +399,7 @@ def coupling_pairs(points: AddedPoints, fluid: np.ndarray, grid: Grid) -> tuple[
     Returns (grid vertex, added point, weight) for the pairs between the grid and the added points (vertices
     inside a body excluded), and (point, point, weight) for the pairs of added points, both directions. Points
     within h of each other lie in the same or neighbouring squares: they are found by sorting the points by
-    square and looking up the 3 × 3 squares around each.
+    square and looking up each point's own square and half of the 8 around it (the other half finds it).
     """
     m = len(points)
     if m == 0:
@@ -405,13 +420,15 @@ def coupling_pairs(points: AddedPoints, fluid: np.ndarray, grid: Grid) -> tuple[
     cell = (base[:, 1] + 1) * stride + base[:, 0] + 1
     order = np.argsort(cell, kind="stable")
     sorted_cell = cell[order]
-    wanted = (cell[:, None] + _NEIGHBOUR_CELLS[:, 1] * stride + _NEIGHBOUR_CELLS[:, 0]).ravel()
+    wanted = (cell[:, None] + _HALF_CELLS[:, 1] * stride + _HALF_CELLS[:, 0]).ravel()
     lo = np.searchsorted(sorted_cell, wanted, "left")
     hi = np.searchsorted(sorted_cell, wanted, "right")
     run, pos = ranges(lo, hi - lo)
-    first = run // len(_NEIGHBOUR_CELLS)
+    first = run // len(_HALF_CELLS)
     second = order[pos]
     diff = uv[first] - uv[second]
     dd = np.hypot(diff[:, 0], diff[:, 1])
-    close = (dd < 1.0) & (first != second)
-    return g, p_idx, w, first[close], second[close], 1.0 - dd[close]
+    # each unordered pair once: across squares from the half neighbourhood, inside a square when first < second
+    close = (dd < 1.0) & ((run % len(_HALF_CELLS) > 0) | (first < second))
+    a, b, weight = first[close], second[close], 1.0 - dd[close]
+    return g, p_idx, w, np.concatenate([a, b]), np.concatenate([b, a]), np.concatenate([weight, weight])

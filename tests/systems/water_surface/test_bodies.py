@@ -156,9 +156,9 @@ def test_a_body_away_from_any_water_falls_freely(tmp_path):
 
 
 def test_a_kinematic_body_follows_its_script_and_keeps_its_velocity(tmp_path):
+    glide = '{ name = "water_surface.glide", params = { velocity = [0.6, 0.0, 0.0], distance = 10.0 } }'
     body = _body("barge", (-1.0, 0.0, 0.0), mass=100.0, kinematic=True).replace(
-        'name = "barge"', 'name = "barge"\nscripts = [{ name = "water_surface.glide", params = { velocity = [0.6, 0.0, 0.0], '
-                          'distance = 10.0 } }]')
+        'name = "barge"', f'name = "barge"\nscripts = [{glide}]')
     app = _app(tmp_path, body)
     barge = _entity(app, "barge")
     app.step(60)
