@@ -18,7 +18,7 @@ from typing import Annotated, Literal
 
 import numpy as np
 from numpy.typing import NDArray
-from pydantic import AfterValidator, Field, model_validator
+from pydantic import AfterValidator, Field, ValidationInfo, model_validator
 
 from engine.collider import Collider
 from engine.config import Color3, ConfigModel, Vec2, Vec3
@@ -120,7 +120,7 @@ class WaterSurface(ConfigModel):
                                                "highlighted (fig. 3.2).")
 
     @model_validator(mode="after")
-    def _grid(self) -> WaterSurface:
+    def _grid(self, info: ValidationInfo) -> WaterSurface:
         nx, nz = self.resolution
         if nx * nz > MAX_GRID_POINTS:
             raise ValueError(f"resolution {nx} × {nz} has {nx * nz} vertices, more than the {MAX_GRID_POINTS} allowed")
@@ -138,8 +138,13 @@ class WaterSurface(ConfigModel):
             object.__setattr__(self, "spacing", hx)
         if self.spacing > 100.0:
             raise ValueError(f"spacing h = {self.spacing:g} m is above 100 m")
-        # The static part of the stability check: unstable at every fixed step the engine accepts.
-        check_stability(self.wave_speed, self.spacing, MIN_FIXED_DT, "even at the smallest fixed_dt 1/1000 s")
+        # With the scene's fixed step (validation context from the scene loader) the check is exact; on its
+        # own (a preset validated alone) only the static part: unstable at every fixed step the engine accepts.
+        scene_dt = (info.context or {}).get("fixed_dt") if info is not None else None
+        if scene_dt is not None:
+            check_stability(self.wave_speed, self.spacing, float(scene_dt), "with the scene's fixed_dt")
+        else:
+            check_stability(self.wave_speed, self.spacing, MIN_FIXED_DT, "even at the smallest fixed_dt 1/1000 s")
         return self
 
     @property
@@ -172,7 +177,6 @@ class WaterState:
     point_kind: NDArray[np.int8] = field(default_factory=lambda: _empty(0, dtype=np.int8))  # 0/1 on u/v line, 2 L'
     segments: NDArray[np.int64] = field(default_factory=lambda: _empty(0, 2, dtype=np.int64))  # outline, CCW
     body_entities: NDArray[np.int64] = field(default_factory=lambda: _empty(0, dtype=np.int64))
-    body_heights: F64 = field(default_factory=lambda: _empty(0))  # body centre above its plane S' at t − 1
     polygons: F64 = field(default_factory=lambda: _empty(0, 0, 2))  # (B, V, 2) cross-sections D' at t, grid units
     polygon_counts: NDArray[np.int64] = field(default_factory=lambda: _empty(0, dtype=np.int64))
     column_depth: F64 | None = None  # (nz, nx) submerged body depth per vertex at t ('grid' method)

@@ -121,7 +121,8 @@ def plan_scene(path: str | Path, registry: Registry, configs_root: Path | None =
         for cname, values in ent.components.items():
             key = ("entities", i, "components", cname)
             try:
-                comps.append((cname, load_component(registry, cname, values, path, text, key, root, plan.files)))
+                comps.append((cname, load_component(registry, cname, values, path, text, key, root, plan.files,
+                                                    {"fixed_dt": config.scene.fixed_dt})))
             except ConfigError as exc:
                 problems.extend(exc.problems)
         scripts = []
@@ -138,8 +139,12 @@ def plan_scene(path: str | Path, registry: Registry, configs_root: Path | None =
 
 
 def load_component(registry: Registry, cname: str, values: dict, file: Path, text: str, key: tuple,
-                   root: Path, files: list[Path] | None = None) -> Any:
-    """Validate one component table (with its optional preset) against the registered model."""
+                   root: Path, files: list[Path] | None = None, context: dict | None = None) -> Any:
+    """Validate one component table (with its optional preset) against the registered model.
+
+    ``context`` reaches the model's validators (``info.context``): the scene passes ``fixed_dt`` so that
+    stability limits that depend on the time step are checked when the file is validated.
+    """
     try:
         spec = registry.component(cname)
     except RegistryError as exc:
@@ -157,7 +162,7 @@ def load_component(registry: Registry, cname: str, values: dict, file: Path, tex
             files.append(preset_file)
     merged = deep_merge(preset, values)
     try:
-        return spec.model.model_validate(merged)
+        return spec.model.model_validate(merged, context=context)
     except ValidationError as exc:
         problems = []
         for p in model_problems(exc, spec.model, str(file), key, text):

@@ -9,8 +9,7 @@
    order along the outline, with the outline segments between consecutive points.
 4. Wave generation (eq. 2.5–2.7): d(t) is how far the outline moved at N_c in one step; N_c rises by α·d(t)
    when its position at t − 1 lies inside the cross-section at t, and sinks by α·d(t) when its position at t
-   lay inside the cross-section at t − 1. An addition for vertical motion (``heave_impulse``): the volume a body
-   sinks into the water is pushed out along its outline.
+   lay inside the cross-section at t − 1.
 5. Coupling with the grid (eq. 2.11, 2.12): pairs of points within radius h with weights r_k / h = 1 − |PN| / h,
    and the grid vertices inside the cross-section, which become a reflecting obstacle.
 """
@@ -23,7 +22,7 @@ import numpy as np
 
 from systems.water_surface.geometry import BOX, EPS_LINE, F64, I64, NUDGE, Bodies, Grid, ranges
 
-__all__ = ["AddedPoints", "Edges", "Sections", "added_points", "coupling_pairs", "cross_sections", "heave_impulse",
+__all__ = ["AddedPoints", "Edges", "Sections", "added_points", "coupling_pairs", "cross_sections",
            "nearest_on_outline", "nudge", "outline_impulse", "solid_vertices"]
 
 # Box corners c = (sx, sy, sz) ∈ {−1, 1}³ and its 12 edges (corner pairs that differ along one axis).
@@ -331,20 +330,6 @@ def outline_impulse(points: AddedPoints, sections: Sections, previous: Sections,
     nb = len(has_previous)
     mean = np.bincount(bi, change, nb) / np.maximum(np.bincount(bi, minlength=nb), 1)
     return change - mean[bi], d, raised, lowered
-
-
-def heave_impulse(sections: Sections, sink: F64, alpha: float) -> F64:
-    """Rise of every added point of body b when it sank by ``sink[b]`` metres relative to the water plane.
-
-    The paper only moves water aside horizontally (eq. 2.6, 2.7), so a wall-sided body plunging or bobbing
-    straight down would make no wave. Here the volume it adds under the water, A·sink, is pushed out as a rise
-    α·A·sink / (L·h) along its outline (A the cross-section's area, L its perimeter: a band one square wide);
-    a rising body draws water in the same way.
-    """
-    e = sections.edges
-    area = 0.5 * np.sum(np.where(e.valid, e.ax * e.ey - e.ay * e.ex, 0.0), axis=1)  # grid units²
-    perimeter = np.sum(np.where(e.valid, np.hypot(e.ex, e.ey), 0.0), axis=1)  # grid units
-    return alpha * sink * area / np.where(perimeter > 0.0, perimeter, 1.0)
 
 
 def nearest_on_outline(points: F64, body: I64, edges: Edges) -> F64:

@@ -3,8 +3,7 @@
 
 Order inside a step (seeds/003): random drops and impact dents → the plane S' of each body (mean water height
 under it) → cross-section D' (2.2.2), nudged (fig. 2.3) → added points (2.2.3) carrying their heights from the
-last step (or lifted onto the surface, eq. 2.2–2.4, when new) → wave generation ±α·d(t) (eq. 2.5–2.7, plus
-the volume a sinking body displaces, pushed out at its outline) →
+last step (or lifted onto the surface, eq. 2.2–2.4, when new) → wave generation ±α·d(t) (eq. 2.5–2.7) →
 propagation (eq. 2.8–2.12) with the vertices inside bodies held as obstacles → damping. With
 ``wave_source = "grid"`` the added points are replaced by the older column displacement (``grid_source``).
 """
@@ -19,7 +18,7 @@ from components.water_surface import WaterState, WaterSurface
 from systems.water_surface.geometry import F64, I64, Bodies, Grid, bilinear
 from systems.water_surface.grid_source import column_depths
 from systems.water_surface.outline import (AddedPoints, Sections, added_points, coupling_pairs, cross_sections,
-                                           heave_impulse, nudge, outline_impulse, solid_vertices)
+                                           nudge, outline_impulse, solid_vertices)
 from systems.water_surface.waves import courant_k, dents, free_degree, propagate
 
 __all__ = ["StepReport", "plane_levels", "step_water"]
@@ -81,12 +80,10 @@ def _near(bodies: Bodies, grid: Grid, state: WaterState, depth: float) -> np.nda
     return over & (y - 2.0 * vertical <= top + 1e-9) & (y + vertical >= grid.y0 - depth)  # tracked a little early
 
 
-def _previous(state: WaterState, bodies: Bodies, width: int) -> tuple[Sections, np.ndarray, F64]:
-    """Each body's cross-section at t − 1 (padded to ``width``), whether it had one, and how high its centre
-    was above its plane S' then."""
+def _previous(state: WaterState, bodies: Bodies, width: int) -> tuple[Sections, np.ndarray]:
+    """Each body's cross-section at t − 1 (padded to ``width``) and whether it had one."""
     polygons = np.zeros((len(bodies), width, 2))
     counts = np.zeros(len(bodies), np.int64)
-    heights = np.zeros(len(bodies))
     known = state.body_entities
     has = np.zeros(len(bodies), bool)
     if len(known) and len(bodies):
@@ -97,8 +94,7 @@ def _previous(state: WaterState, bodies: Bodies, width: int) -> tuple[Sections, 
         w = min(width, state.polygons.shape[1])
         polygons[has, :w] = state.polygons[src[has], :w]
         counts[has] = np.minimum(state.polygon_counts[src[has]], w)
-        heights[has] = state.body_heights[src[has]]
-    return Sections(polygons, counts, counts, counts), has, heights
+    return Sections(polygons, counts, counts, counts), has
 
 
 def _carried(state: WaterState, points: AddedPoints, z: F64, zp: F64) -> tuple[F64, F64]:
@@ -172,7 +168,7 @@ def step_water(state: WaterState, cfg: WaterSurface, grid: Grid, bodies: Bodies,
     state.previous, state.heights = z, new
     state.point_keys, state.point_uv, state.point_kind = points.keys, points.uv, points.kind
     state.point_heights, state.point_previous, state.segments = new_points, previous_points, points.segments
-    state.body_entities, state.body_heights = bodies.entities.copy(), bodies.position[:, 1].copy()
+    state.body_entities = bodies.entities.copy()
     state.polygons, state.polygon_counts = report.sections.polygons, report.sections.counts
     state.last_raised = report.change
     report.points = points
@@ -185,11 +181,8 @@ def _outline_step(state, cfg, grid, bodies, sections, levels, plane_y, k, report
     points, sections = added_points(sections, bodies.entities, grid)
     report.sections = sections
     heights, previous = _carried(state, points, z, zp)
-    before, has, was_above = _previous(state, bodies, sections.polygons.shape[1])
+    before, has = _previous(state, bodies, sections.polygons.shape[1])
     change, _, raised, lowered = outline_impulse(points, sections, before, has, grid, cfg.outline_constant)
-    if len(points):  # the addition for vertical motion: the submerged volume it adds is pushed out at the outline
-        sink = np.where(has & (before.counts >= 3), was_above - bodies.position[:, 1], 0.0)
-        change = change + heave_impulse(sections, sink, cfg.outline_constant)[points.body]
     solid, solid_body = solid_vertices(sections, grid)
     state.solid = np.zeros(z.shape, bool)
     state.solid.ravel()[solid] = True
