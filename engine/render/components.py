@@ -41,6 +41,9 @@ class CameraConfig(ConfigModel):
     move_speed: float = Field(10.0, ge=0.0, le=1000.0, description="Fly speed in metres per second.")
     look_sensitivity: float = Field(0.2, ge=0.0, le=10.0, description="Degrees per pixel of mouse motion.")
     border_color: Color3 = Field((0.9, 0.9, 0.9), description="Frame colour drawn around a partial viewport.")
+    hide_features: list[str] = Field(default_factory=list, max_length=32,
+                                     description="Render features not drawn in this view (e.g. 'grass_field' "
+                                                 "in a minimap).")
     enabled: bool = True
 
 

@@ -221,6 +221,7 @@ class Renderer:
                  is_main=main, camera_entity=entity)
         v.extra["rect"] = rect
         v.extra["border"] = tuple(cfg.border_color)
+        v.extra["hide"] = frozenset(cfg.hide_features)
         return v
 
     # --------------------------------------------------------------------- frame
@@ -244,8 +245,9 @@ class Renderer:
         final = graph.import_resource("final", self._final, TextureDesc(self.width, self.height, "rgba8"))
         for view in self.views:
             self._declare_view_targets(timed, view)
+            hidden = view.extra.get("hide", ())
             for index, feature in self._ordered:
-                if feature.phase < OVERLAY:
+                if feature.phase < OVERLAY and feature.name not in hidden:
                     feature.add_passes(timed, view, data[index])
         for i, view in enumerate(self.views):
             final = self._declare_present(timed, final, view, first=i == 0)

@@ -138,8 +138,8 @@ class EnergyWaveFeature(RenderFeature):
                 first += count
 
     def add_passes(self, graph, view: View, data: FrameData) -> None:
-        if data is None or not data.emitters:
-            return
+        if data is None or not data.emitters or len(data.records) == 0:
+            return  # nothing alive: no passes, no full-screen composite
         ctx = self.ctx
         size = (max(1, view.width // PARTICLE_DOWNSCALE), max(1, view.height // PARTICLE_DOWNSCALE))
         glow_size = (max(1, view.width // GLOW_DOWNSCALE), max(1, view.height // GLOW_DOWNSCALE))

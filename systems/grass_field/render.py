@@ -425,9 +425,13 @@ class FieldGpu:
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
         lighting = self._lighting(view)
-        # levels 0-3: one cell list, one draw per level and primitive type
+        # levels 0-3: one cell list (each level front to back, for early depth rejection), one draw per level
+        # and primitive type
         counts = [len(c) for c in plan.cells]
-        cells = np.concatenate(plan.cells) if sum(counts) else np.zeros(0, np.int32)
+        centres = self.data.placed.cell_centre
+        ordered = [c[np.argsort(np.sum((centres[c] - camera.position) ** 2, axis=1), kind="stable")]
+                   for c in plan.cells]
+        cells = np.concatenate(ordered) if sum(counts) else np.zeros(0, np.int32)
         if len(cells):
             self._cell_upload[:len(cells)] = cells
             self.cell_tex.write(self._cell_upload.tobytes())

@@ -84,3 +84,20 @@ def test_cli_screenshot_and_graph_dot(tmp_path):
     dot = subprocess.run([sys.executable, "-m", "engine", "graph", SCENE, "--dot"], capture_output=True, text=True)
     assert dot.returncode == 0, dot.stderr
     assert dot.stdout.startswith("digraph") and "present.view0" in dot.stdout and "sky.view0" in dot.stdout
+
+
+def test_a_camera_can_hide_features_in_its_view():
+    app = App(SCENE)
+    e = app.world.spawn(Transform())
+    cfg = CameraConfig(controller="top", projection="orthographic", viewport=[0.5, 0.5, 0.5, 0.5], priority=3,
+                       hide_features=["meshes"])
+    from engine.registry import BuildContext
+
+    app.world.add(e, build_camera(cfg, BuildContext(app.world, e, "map", "", None)))
+    renderer = make_renderer(app, 96, 64)
+    app.step(1)
+    renderer.extract(app.world)
+    order = renderer.declare().compile().order
+    renderer.release()
+    app.renderer = None
+    assert "meshes.view0" in order and "meshes.view1" not in order and "terrain.view1" in order
