@@ -1,9 +1,10 @@
 """``python -m engine gallery``: render every preset in configs/effects/ headless to a PNG.
 
 Each preset is dropped into a scene template: ``configs/gallery/<effect>.toml`` when the effect ships
-one (a valid scene whose ``preset = "<effect>/..."`` line is pointed at each preset in turn; a
-``#:gallery-steps N`` line sets the ticks simulated before the picture), otherwise a generic stage
-(flat terrain, an orbit camera, the component on an entity above the origin).  ``docs/gallery.md`` lists the pictures
+one, else its showcase scene ``configs/scenes/<effect>_showcase.toml`` (a valid scene whose
+``preset = "<effect>/..."`` lines are pointed at each preset in turn; a ``#:gallery-steps N`` line sets
+the ticks simulated before the picture), otherwise a generic stage (flat terrain, an orbit camera, the
+component on an entity above the origin).  ``docs/gallery.md`` lists the pictures
 with the preset names and the first comment line of each preset.
 """
 
@@ -51,6 +52,14 @@ preset = "@PRESET@"
 """
 
 
+def _template(configs: Path, effect: str) -> str:
+    """The effect's gallery stage, else its showcase scene, else the generic stage."""
+    for candidate in (configs / "gallery" / f"{effect}.toml", configs / "scenes" / f"{effect}_showcase.toml"):
+        if candidate.exists() and f'"{effect}/' in candidate.read_text(encoding="utf-8"):
+            return candidate.read_text(encoding="utf-8")
+    return GENERIC
+
+
 def preset_title(path: Path) -> str:
     for line in path.read_text(encoding="utf-8").splitlines():
         text = line.strip()
@@ -76,8 +85,7 @@ def gallery_command(args: argparse.Namespace) -> int:
         spec = registry.preset_component(preset.parent.name)
         if spec is None:
             continue
-        template = configs / "gallery" / f"{preset.parent.name}.toml"
-        text = template.read_text(encoding="utf-8") if template.exists() else GENERIC
+        text = _template(configs, preset.parent.name)
         steps = 90
         for line in text.splitlines():
             if line.startswith("#:gallery-steps"):
