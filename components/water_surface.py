@@ -258,7 +258,8 @@ class RigidBodyState:
 
 def build_rigid_body(cfg: RigidBody, ctx: BuildContext) -> list:
     """[config, RigidBodyState, Collider]: the collider matches the body's shape for the other effects' queries."""
-    if ctx.world.has(ctx.entity, Collider):
+    # A RigidBodyState already there means a hot-reload rebuild of this body: the Collider is its own, replaced.
+    if ctx.world.has(ctx.entity, Collider) and not ctx.world.has(ctx.entity, RigidBodyState):
         raise ValueError("this entity already has a Collider: a RigidBody adds its own from 'shape', "
                          "'half_extents' and 'radius'; remove the [Collider] table")
     state = RigidBodyState(np.array(cfg.velocity, float), np.array(cfg.angular_velocity, float))

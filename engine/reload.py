@@ -141,7 +141,12 @@ class HotReloader:
                 record.components[cname] = (cfg, old[1])
                 changes.append(f"{record.name}.{cname}: parameters updated ({', '.join(_diff(old[0], cfg))})")
                 continue
-            built = build_component(world, registry, plan, record.entity, record.name, cname, cfg)
+            try:
+                built = build_component(world, registry, plan, record.entity, record.name, cname, cfg)
+            except (ValueError, OSError) as exc:  # the old component stays in force
+                self.status.errors.append(f"{plan.file}: {record.name}.{cname}: cannot rebuild: {exc}")
+                changes.append(f"{record.name}.{cname}: rebuild failed, kept the old one")
+                continue
             types = [type(c) for c in built]
             for ctype in old[1] if old else []:
                 if ctype not in types and world.has(record.entity, ctype):

@@ -171,7 +171,9 @@ class _Plugin:
     name = "dust_devil"
 
     def build(self, registry) -> None:
-        # hot reload: only the particle count needs a rebuild; every other key is read live each step
+        # hot reload: only the particle count needs a rebuild (it sizes the particle arrays); every other key is
+        # read from the config each step (the wind grid is re-evaluated every step from grid_resolution,
+        # field_size and wind_scale) or each frame; prewarm_time is read at the first step only.
         registry.add_component("DustDevil", DustDevilConfig, build_dust_devil, preset_dir="dust_devil",
                                structural=("particle_count",))
         registry.add_system(mouse_drag_system, Stage.INPUT, name="dust_devil.mouse_drag", after=("core.input",))

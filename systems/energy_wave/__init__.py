@@ -77,6 +77,22 @@ def set_pattern(world: World, entity: int, pattern: str = "A", emitter: int | No
     return configure(world, entity, emitter=emitter, **PATTERN_PARAMETERS[key])
 
 
+def live_update(old: EnergyWaveEmitter, new: EnergyWaveEmitter, world: World, entity: int) -> None:
+    """Hot reload, after the config was swapped in place: adjust the state the build derived from the config.
+
+    ``max_particles`` resizes the particle buffer keeping the live particles (the first ``max_particles`` when it
+    shrinks); ``emitting`` seeds ``state.emitting`` at build time, so an edit of it in the file switches the
+    emission now (scripts keep switching it with ``energy_wave.set_emitting`` between edits).
+    """
+    state = world.try_get(entity, EnergyWaveState)
+    if state is None:
+        return
+    if state.particles.capacity != new.max_particles:
+        state.particles.grow(new.max_particles)
+    if new.emitting != old.emitting:
+        state.emitting = new.emitting
+
+
 def _make_feature(renderer):
     from .render import EnergyWaveFeature
 
@@ -87,7 +103,11 @@ class _Plugin:
     name = "energy_wave"
 
     def build(self, registry: Registry) -> None:
-        registry.add_component("EnergyWaveEmitter", EnergyWaveEmitter, build_energy_wave, preset_dir="energy_wave")
+        # Hot reload: nothing needs a rebuild.  The state holds the particles (sized by max_particles: resized by
+        # live_update, keeping them), the emission clock and a noise seed drawn from the entity's stream; every
+        # other key is read from the config each step (simulate.py) or each frame (render.py).
+        registry.add_component("EnergyWaveEmitter", EnergyWaveEmitter, build_energy_wave, preset_dir="energy_wave",
+                               structural=(), live_update=live_update)
         registry.add_system(simulate_system, Stage.SIMULATION, name="energy_wave.simulate")
         registry.add_command("energy_wave.fire", fire)
         registry.add_command("energy_wave.set_emitting", set_emitting)

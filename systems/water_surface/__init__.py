@@ -8,8 +8,45 @@ simulation never imports GL), the render feature that draws the water.
 
 from __future__ import annotations
 
+import numpy as np
+
 from engine.registry import Registry
 from engine.schedule import Stage
+
+# Hot reload.  WaterSurface: the grid's shape (resolution), and the spacing h that the build bakes into the
+# state's origin and into the height-field Collider (extent sets h).  The coefficient caches of eq. 2.8 are keyed
+# on k, so wave_speed is live; everything else is read each step.
+WATER_STRUCTURAL = ("resolution", "spacing", "extent")
+# RigidBody: the initial velocities are copied into the state at build time (an edit relaunches the body from
+# where it is).  shape, half_extents and radius live in the Collider the build adds: live_update replaces it.
+BODY_STRUCTURAL = ("velocity", "angular_velocity")
+
+
+def water_live_update(old, new, world, entity: int) -> None:
+    """Switching ``wave_source`` drops the other method's history so the switch makes no wave of its own."""
+    from components.water_surface import WaterState
+
+    state = world.try_get(entity, WaterState)
+    if state is None or old.wave_source == new.wave_source:
+        return
+    state.column_depth = None
+    if new.wave_source == "grid":  # every body counts as new: its depth change starts from this step
+        state.body_entities = np.zeros(0, np.int64)
+
+
+def body_live_update(old, new, world, entity: int) -> None:
+    """A new shape or size: the body's Collider (which the systems read) is rebuilt; its motion is kept."""
+    from dataclasses import replace
+
+    from engine.collider import Collider
+
+    if (old.shape, old.half_extents, old.radius) == (new.shape, new.half_extents, new.radius):
+        return
+    collider = world.try_get(entity, Collider)
+    if collider is None:
+        return
+    world.add(entity, replace(collider, shape=new.shape, half_extents=np.array(new.half_extents, float),
+                              radius=new.radius))
 
 
 class WaterSurfacePlugin:
@@ -19,8 +56,10 @@ class WaterSurfacePlugin:
         from components.water_surface import RigidBody, WaterSurface, build_rigid_body, build_water_surface
         from systems.water_surface import api, simulate
 
-        registry.add_component("WaterSurface", WaterSurface, build_water_surface, preset_dir="water_surface")
-        registry.add_component("RigidBody", RigidBody, build_rigid_body)
+        registry.add_component("WaterSurface", WaterSurface, build_water_surface, preset_dir="water_surface",
+                               structural=WATER_STRUCTURAL, live_update=water_live_update)
+        registry.add_component("RigidBody", RigidBody, build_rigid_body, structural=BODY_STRUCTURAL,
+                               live_update=body_live_update)
         registry.add_system(simulate.startup_check, Stage.STARTUP, name="water_surface.check")
         registry.add_system(simulate.impacts_system, Stage.SIMULATION, name="water_surface.impacts")
         registry.add_system(simulate.bodies_system, Stage.SIMULATION, name="water_surface.bodies",

@@ -115,3 +115,21 @@ def test_script_parameters_reload_in_place(tmp_path):
     reloader.poll()
     assert app.world.get(app.records[0].entity, Scripts).slots[0].script is script
     assert script.params.speed == 99.0
+
+
+def test_a_rebuild_that_fails_keeps_the_old_component(tmp_path):
+    app, reloader, root = setup(tmp_path)
+    spec = app.registry.components["Pump"]
+    original = spec.build
+
+    def failing(cfg, ctx):
+        if cfg.capacity == 9:
+            raise ValueError("capacity 9 needs a bigger tank")
+        return original(cfg, ctx)
+
+    spec.build = failing
+    app.step(1)
+    state = state_of(app)
+    (root / "scenes" / "s.toml").write_text(SCENE.format(capacity=9, speed=10.0))
+    reloader.poll()  # does not raise
+    assert state_of(app) is state and any("bigger tank" in e for e in reloader.status.errors)
