@@ -2,8 +2,8 @@
 
 Each preset is dropped into a scene template: ``configs/gallery/<effect>.toml`` when the effect ships
 one, else its showcase scene ``configs/scenes/<effect>_showcase.toml`` (a valid scene whose
-``preset = "<effect>/..."`` lines are pointed at each preset in turn; a ``#:gallery-steps N`` line sets
-the ticks simulated before the picture), otherwise a generic stage (flat terrain, an orbit camera, the
+``preset = "<effect>/..."`` lines are pointed at each preset in turn; a ``#:gallery-steps N`` line, in
+the template or in the preset itself, sets the ticks simulated before the picture), otherwise a generic stage (flat terrain, an orbit camera, the
 component on an entity above the origin).  ``docs/gallery.md`` lists the pictures
 with the preset names and the first comment line of each preset.
 """
@@ -52,20 +52,32 @@ preset = "@PRESET@"
 """
 
 
-def _template(configs: Path, effect: str) -> str:
-    """The effect's gallery stage, else its showcase scene, else the generic stage."""
-    for candidate in (configs / "gallery" / f"{effect}.toml", configs / "scenes" / f"{effect}_showcase.toml"):
+def _template(configs: Path, preset: Path) -> str:
+    """The stage named by the preset's ``#:gallery-template NAME`` line, else the effect's gallery stage,
+    else its showcase scene, else the generic stage."""
+    effect = preset.parent.name
+    candidates = [configs / "gallery" / f"{line.split()[-1]}.toml"
+                  for line in preset.read_text(encoding="utf-8").splitlines() if line.startswith("#:gallery-template")]
+    candidates += [configs / "gallery" / f"{effect}.toml", configs / "scenes" / f"{effect}_showcase.toml"]
+    for candidate in candidates:
         if candidate.exists() and f'"{effect}/' in candidate.read_text(encoding="utf-8"):
             return candidate.read_text(encoding="utf-8")
     return GENERIC
 
 
 def preset_title(path: Path) -> str:
+    """The preset's first block of comment lines (after ``#:schema``), joined into one paragraph."""
+    lines: list[str] = []
     for line in path.read_text(encoding="utf-8").splitlines():
         text = line.strip()
-        if text.startswith("#") and not text.startswith("#:"):
-            return text.lstrip("# ").strip()
-    return ""
+        if text.startswith("#:"):
+            continue
+        if not text.startswith("#"):
+            if lines:
+                break
+            continue
+        lines.append(text.lstrip("#").strip())
+    return " ".join(lines)
 
 
 def gallery_command(args: argparse.Namespace) -> int:
@@ -85,10 +97,10 @@ def gallery_command(args: argparse.Namespace) -> int:
         spec = registry.preset_component(preset.parent.name)
         if spec is None:
             continue
-        text = _template(configs, preset.parent.name)
+        text = _template(configs, preset)
         steps = 90
-        for line in text.splitlines():
-            if line.startswith("#:gallery-steps"):
+        for line in text.splitlines() + preset.read_text(encoding="utf-8").splitlines():
+            if line.startswith("#:gallery-steps"):  # the preset's own line comes last and wins
                 steps = int(line.split()[-1])
         text = text.replace("@COMPONENT@", spec.name).replace("@PRESET@", rel)
         text = re.sub(rf'preset\s*=\s*"{re.escape(preset.parent.name)}/[^"]*"', f'preset = "{rel}"', text)

@@ -82,17 +82,7 @@ def empty_bodies() -> Bodies:
 def bilinear(field: F64, uv: F64) -> F64:
     """Bilinear height of ``field[j, i]`` at (u, v) (..., 2), clamped to the grid (eq. 2.2; on a grid edge it is the
     linear interpolation of eq. 2.3 / 2.4)."""
-    nz, nx = field.shape
-    u = np.clip(uv[..., 0], 0.0, nx - 1)
-    v = np.clip(uv[..., 1], 0.0, nz - 1)
-    i = np.minimum(u.astype(np.int64), nx - 2)
-    j = np.minimum(v.astype(np.int64), nz - 2)
-    tu, tv = u - i, v - j
-    z00, z10 = field[j, i], field[j, i + 1]
-    z01, z11 = field[j + 1, i], field[j + 1, i + 1]
-    bottom = z00 + tu * (z10 - z00)
-    top = z01 + tu * (z11 - z01)
-    return bottom + tv * (top - bottom)
+    return bilinear_with_slope(field, uv)[0]
 
 
 def bilinear_with_slope(field: F64, uv: F64) -> tuple[F64, F64, F64]:
