@@ -124,6 +124,7 @@ def restore(world: World, snap: Snapshot) -> None:
     world.commands._queue = data["commands_queue"]
     world._query_cache.clear()
     world._cache_by_type.clear()
+    world._each_cache.clear()
 
 
 def _shared_memo(world: World) -> dict[int, Any]:

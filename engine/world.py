@@ -9,7 +9,9 @@ cached query yields ``(entity, (c1, c2, ...))`` in ascending entity id order.
 
 from __future__ import annotations
 
+from bisect import bisect_left
 from collections.abc import Callable, Iterator
+from operator import itemgetter
 from typing import Any, TypeVar
 
 from engine.commands import Commands
@@ -35,6 +37,7 @@ class World:
         self._entities: dict[Entity, dict[type, Any]] = {}
         self._stores: dict[type, dict[Entity, Any]] = {}
         self._query_cache: dict[tuple, list[tuple[Entity, tuple]]] = {}
+        self._each_cache: dict[type, list[tuple[Entity, Any]]] = {}
         self._cache_by_type: dict[type, set[tuple]] = {}
         self._resources: dict[type, Any] = {}
         self._state_resources: set[type] = set()
@@ -90,7 +93,7 @@ class World:
         ctype = type(component)
         comps[ctype] = component
         self._stores.setdefault(ctype, {})[entity] = component
-        self._invalidate(ctype)
+        self._refresh(entity, ctype)
 
     insert = add
 
@@ -127,7 +130,7 @@ class World:
         Returns the cached list: iterate it, do not mutate it.  Structural changes made while
         iterating must go through :attr:`commands` (they invalidate the cache when applied).
         """
-        key = (ctypes, tuple(exclude))
+        key = (ctypes, exclude if type(exclude) is tuple else tuple(exclude))
         cached = self._query_cache.get(key)
         if cached is not None:
             return cached
@@ -148,6 +151,16 @@ class World:
         for c in (*ctypes, *exclude):
             self._cache_by_type.setdefault(c, set()).add(key)
         return result
+
+    def each(self, ctype: type[T]) -> list[tuple[Entity, T]]:
+        """``(entity, component)`` for every entity with ``ctype``, ascending by id (cached like :meth:`query`,
+        without the one-element tuple: the cheapest way to walk a single component type)."""
+        rows = self._each_cache.get(ctype)
+        if rows is None:
+            store = self._stores.get(ctype, {})
+            rows = sorted(store.items(), key=_entity_of)
+            self._each_cache[ctype] = rows
+        return rows
 
     def query_one(self, *ctypes: type) -> tuple[Entity, tuple] | None:
         """The first (lowest id) match of :meth:`query`, or ``None``."""
@@ -201,20 +214,57 @@ class World:
         component = self._entities[entity].pop(ctype)
         store = self._stores[ctype]
         del store[entity]
-        self._invalidate(ctype)
+        self._refresh(entity, ctype)
         return component
 
-    def _invalidate(self, ctype: type) -> None:
-        keys = self._cache_by_type.pop(ctype, None)
-        if keys:
-            for key in keys:
-                self._query_cache.pop(key, None)
+    def _refresh(self, entity: Entity, ctype: type) -> None:
+        """Keep every cached query that involves ``ctype`` exact after ``entity`` changed.
+
+        Each cached list stays sorted by entity id: the entity's row is inserted, replaced or removed
+        in place (a binary search, then one C-level list operation), so spawning and despawning do not
+        force whole queries to be rebuilt.
+        """
+        comps = self._entities.get(entity, {})
+        rows = self._each_cache.get(ctype)
+        if rows is not None:
+            i = bisect_left(rows, entity, key=_entity_of)
+            present = i < len(rows) and rows[i][0] == entity
+            if ctype in comps:
+                if present:
+                    rows[i] = (entity, comps[ctype])
+                else:
+                    rows.insert(i, (entity, comps[ctype]))
+            elif present:
+                del rows[i]
+        keys = self._cache_by_type.get(ctype)
+        if not keys:
+            return
+        for key in list(keys):
+            rows = self._query_cache.get(key)
+            if rows is None:
+                keys.discard(key)
+                continue
+            ctypes, exclude = key
+            i = bisect_left(rows, entity, key=_entity_of)
+            present = i < len(rows) and rows[i][0] == entity
+            matches = all(c in comps for c in ctypes) and not any(c in comps for c in exclude)
+            if matches:
+                row = (entity, tuple(comps[c] for c in ctypes))
+                if present:
+                    rows[i] = row
+                else:
+                    rows.insert(i, row)
+            elif present:
+                del rows[i]
 
     def iter_state(self) -> Iterator[tuple[Entity, list[Any]]]:
         """Entities ascending with their components sorted by qualified type name (for hashing)."""
         for entity in sorted(self._entities):
             comps = self._entities[entity]
             yield entity, [comps[t] for t in sorted(comps, key=_qualname)]
+
+
+_entity_of = itemgetter(0)
 
 
 def _qualname(t: type) -> str:

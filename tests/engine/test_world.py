@@ -113,3 +113,20 @@ def test_events_each_read_once_and_live_two_ticks():
     ev.update()
     assert ev.pending(int) == []
     assert early.read() == []  # 3 was dropped before this reader looked; nothing is read twice
+
+
+def test_each_and_queries_stay_exact_under_incremental_updates():
+    w = World()
+    ids = [w.spawn(Pos(i), Vel()) for i in range(6)]
+    each, both, no_frozen = w.each(Pos), w.query(Pos, Vel), w.query(Pos, exclude=(Frozen,))
+    late = w.spawn(Pos(10))  # appended to the cached lists in place
+    w.despawn(ids[2])
+    w.add(ids[4], Frozen())
+    w.remove(ids[5], Vel)
+    w.add(ids[0], Pos(-1))  # replacement
+    fresh = World()  # the same state built from scratch must give the same rows
+    expect_each = sorted((e, w.get(e, Pos)) for e in w.entities if w.has(e, Pos))
+    assert w.each(Pos) is each and each == expect_each
+    assert [e for e, _ in both] == [ids[0], ids[1], ids[3], ids[4]] and both[0][1][0].x == -1
+    assert [e for e, _ in no_frozen] == [ids[0], ids[1], ids[3], ids[5], late]
+    assert fresh.each(Pos) == []
