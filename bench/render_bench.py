@@ -50,7 +50,7 @@ def boxes_app(n: int) -> App:
     for i in range(n):
         x, z = (i % side - side / 2) * 1.5, (i // side - side / 2) * 1.5
         t = Transform(position=np.array([x, 0.5, z]), scale=np.full(3, 0.8))
-        w.spawn(t, MeshConfig(shape="box", color=tuple(rng.uniform(0.2, 0.9, 3))))
+        w.spawn(t, MeshConfig(shape="box", color=[float(c) for c in rng.uniform(0.2, 0.9, 3)]))
     cam = w.spawn(Transform())
     cfg = CameraConfig(controller="orbit", distance=side * 1.2, pitch=-35.0, far=2000.0)
     w.add(cam, build_camera(cfg, BuildContext(w, cam, "camera", "", None)))

@@ -100,16 +100,35 @@ def quat_rotate(q: ArrayLike, v: ArrayLike) -> F64:
 
 
 def quat_to_matrix(q: ArrayLike) -> F64:
-    """3×3 rotation matrix (column-vector convention) of q, with s = 2/|q|² so non-unit q still give a rotation."""
+    """3×3 rotation matrix (column-vector convention) of q, with s = 2/|q|² so non-unit q still give a rotation.
+
+    Vectorised over leading axes: (..., 4) -> (..., 3, 3), written entry by entry into one array.
+    """
     q = np.asarray(q, dtype=np.float64)
-    w, x, y, z = np.moveaxis(q, -1, 0)
-    s = 2.0 / np.sum(q * q, axis=-1)
-    rows = [
-        [1.0 - s * (y * y + z * z), s * (x * y - w * z), s * (x * z + w * y)],
-        [s * (x * y + w * z), 1.0 - s * (x * x + z * z), s * (y * z - w * x)],
-        [s * (x * z - w * y), s * (y * z + w * x), 1.0 - s * (x * x + y * y)],
-    ]
-    return np.stack([np.stack(row, axis=-1) for row in rows], axis=-2)
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    s = 2.0 / (w * w + x * x + y * y + z * z)
+    xs, ys, zs = x * s, y * s, z * s
+    m = np.empty(q.shape[:-1] + (3, 3))
+    m[..., 0, 0] = 1.0 - (y * ys + z * zs)
+    m[..., 0, 1] = x * ys - w * zs
+    m[..., 0, 2] = x * zs + w * ys
+    m[..., 1, 0] = x * ys + w * zs
+    m[..., 1, 1] = 1.0 - (x * xs + z * zs)
+    m[..., 1, 2] = y * zs - w * xs
+    m[..., 2, 0] = x * zs - w * ys
+    m[..., 2, 1] = y * zs + w * xs
+    m[..., 2, 2] = 1.0 - (x * xs + y * ys)
+    return m
+
+
+def model_matrices(positions: ArrayLike, rotations: ArrayLike, scales: ArrayLike) -> F64:
+    """Batched T·R·S model matrices (N, 4, 4) from positions (N, 3), quaternions (N, 4) and scales (N, 3)."""
+    positions = np.asarray(positions, dtype=np.float64)
+    m = np.zeros(positions.shape[:-1] + (4, 4))
+    m[..., :3, :3] = quat_to_matrix(rotations) * np.asarray(scales, dtype=np.float64)[..., None, :]
+    m[..., :3, 3] = positions
+    m[..., 3, 3] = 1.0
+    return m
 
 
 def _vec3(value: ArrayLike, name: str) -> F64:

@@ -17,7 +17,7 @@ from engine.builtin import Terrain
 from engine.render.components import Hud, MeshConfig
 from engine.render.feature import OPAQUE, OVERLAY, SKY, RenderFeature, View
 from engine.render.graph import TextureDesc
-from engine.spatial import Transform
+from engine.spatial import Transform, model_matrices
 
 if TYPE_CHECKING:
     from engine.render.renderer import Renderer
@@ -245,8 +245,12 @@ class MeshFeature(RenderFeature):
                 groups.setdefault(mesh.shape, []).append((t, mesh))
         out = {}
         for shape, items in groups.items():
+            transforms = [t for t, _ in items]
+            matrices = model_matrices(np.array([t.position for t in transforms]),
+                                      np.array([t.rotation for t in transforms]),
+                                      np.array([t.scale for t in transforms]))
             data = np.empty((len(items), self.INSTANCE_FLOATS), np.float32)
-            data[:, :16] = np.stack([t.matrix().T.ravel() for t, _ in items])
+            data[:, :16] = matrices.transpose(0, 2, 1).reshape(len(items), 16)  # column-major for GLSL
             data[:, 16:19] = [m.color for _, m in items]
             data[:, 19] = [m.emissive for _, m in items]
             out[shape] = data

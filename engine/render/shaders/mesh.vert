@@ -15,7 +15,9 @@ void main() {
     mat4 model = mat4(m0, m1, m2, m3);
     vec4 world = model * vec4(in_position, 1.0);
     v_pos = world.xyz;
-    v_normal = transpose(inverse(mat3(model))) * in_normal;
+    // normal matrix of M = R·S without an inverse: (R·S)^-T n = R·S^-1 n = M (n / s²), s the column lengths
+    vec3 s2 = vec3(dot(m0.xyz, m0.xyz), dot(m1.xyz, m1.xyz), dot(m2.xyz, m2.xyz));
+    v_normal = mat3(model) * (in_normal / s2);
     v_color = in_color;
     gl_Position = view_proj * world;
 }
