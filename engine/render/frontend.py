@@ -150,13 +150,20 @@ def _run_window(app: App, size, steps, every, last, profile: bool) -> None:
         if every and state["frames"] % every[0] == 0:
             renderer.save_screenshot(every[1] / f"frame_{state['frames']:05d}.png")
         if steps is not None and app.world.tick >= steps:
-            window.close()
+            pyglet.app.exit()  # leave the loop; the window closes below (closing inside on_draw breaks pyglet)
+
+    @window.event
+    def on_close():
+        pyglet.app.exit()
+        return True
 
     pyglet.app.run(interval=0)
     if last:
         renderer.save_screenshot(last)
     if profile:
         print(renderer.timer.report())
+    renderer.release()
+    window.close()
 
 
 def attach_window_input(window, queue: InputQueue, renderer: Renderer, reloader=None) -> None:
