@@ -98,23 +98,27 @@ def _toml_files(paths: list[Path]) -> tuple[list[Path], list[Problem]]:
     return files, problems
 
 
-def validate_file(path: Path, registry: Registry) -> None:
-    """Validate one TOML file: a scene, or a preset under ``effects/<dir>/``. Raises ConfigError."""
+def validate_file(path: Path, registry: Registry):
+    """Validate one TOML file: a scene, a prefab, or a preset under ``effects/<dir>/``.
+
+    Returns what it validated (a ScenePlan, a prefab's EntityPlan or the preset's config model); raises
+    ConfigError listing every problem.
+    """
     from engine.scene import plan_scene
 
     data, text = read_toml(path)
     if path.parent.name == "prefabs":
         from engine.prefab import PrefabLibrary
 
-        PrefabLibrary(registry, path.parent.parent).plan(path.stem)
+        return PrefabLibrary(registry, path.parent.parent).plan(path.stem)
     elif path.parent.parent.name == "effects":
         spec = registry.preset_component(path.parent.name)
         if spec is None:
             raise ConfigError([Problem(str(path), "", f"no registered component keeps presets in "
                                                       f"'{path.parent.name}/'")])
-        validate(spec.model, data, str(path), (), text)
+        return validate(spec.model, data, str(path), (), text)
     elif "entities" in data or "scene" in data or path.parent.name == "scenes":
-        plan_scene(path, registry)
+        return plan_scene(path, registry)
     else:
         raise ConfigError([Problem(str(path), "", "neither a scene (with [scene] or [[entities]]) nor a preset "
                                                   "under effects/<name>/")])

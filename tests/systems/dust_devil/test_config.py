@@ -30,7 +30,8 @@ def test_preset_validates_and_has_schema_header(path, registry):
 
 
 def test_showcase_scene_validates(registry):
-    validate_file(SHOWCASE, registry)
+    plan = validate_file(SHOWCASE, registry)
+    assert any(c == "DustDevil" for ent in plan.entities for c, _ in ent.components)
 
 
 def test_paper_preset_is_the_papers_setup():

@@ -80,7 +80,8 @@ def test_pattern_presets_match_the_command_table(pattern):
 
 
 def test_showcase_scene_validates():
-    validate_file(SCENE, default_registry())
+    plan = validate_file(SCENE, default_registry())
+    assert any(c == "EnergyWaveEmitter" for ent in plan.entities for c, _ in ent.components)
 
 
 def _errors(data):

@@ -36,7 +36,8 @@ def test_paper_preset_is_the_papers_setup(registry):
 
 
 def test_showcase_validates(registry):
-    validate_file(SHOWCASE, registry)
+    plan = validate_file(SHOWCASE, registry)
+    assert any(c == "GrassField" for ent in plan.entities for c, _ in ent.components)
 
 
 def _problems(tmp_path, registry, body: str):

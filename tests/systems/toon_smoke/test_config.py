@@ -21,7 +21,8 @@ def test_presets_validate(name, registry):
 
 
 def test_showcase_scene_validates(registry):
-    validate_file(CONFIGS / "scenes" / "toon_smoke_showcase.toml", registry)
+    plan = validate_file(CONFIGS / "scenes" / "toon_smoke_showcase.toml", registry)
+    assert any(c == "ToonSmokeVolume" for ent in plan.entities for c, _ in ent.components)
 
 
 def _error(tmp_path, extra: str) -> str:

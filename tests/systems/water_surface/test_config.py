@@ -29,7 +29,8 @@ def test_presets_validate(path, registry):
 
 
 def test_showcase_scene_validates(registry):
-    validate_file(CONFIGS / "scenes" / "water_surface_showcase.toml", registry)
+    plan = validate_file(CONFIGS / "scenes" / "water_surface_showcase.toml", registry)
+    assert any(c == "WaterSurface" for ent in plan.entities for c, _ in ent.components)
 
 
 def _error(tmp_path, water: str, bodies: str = "", extra: str = "") -> str:
@@ -72,7 +73,8 @@ def test_unstable_because_of_a_coarse_scene_step(tmp_path):
 
 def test_stable_at_the_limit_is_accepted(tmp_path):
     # c·Δt/h = 16.97 · (1/60) / 0.4 = 0.707 (just under 1/√2)
-    App(write_scene(tmp_path, "wave_speed = 16.97\nspacing = 0.4"), configs_root=CONFIGS)
+    app = App(write_scene(tmp_path, "wave_speed = 16.97\nspacing = 0.4"), configs_root=CONFIGS)
+    assert any("WaterSurface" in record.components for record in app.records)
 
 
 def test_unstable_at_every_step_fails_in_the_model(tmp_path):
