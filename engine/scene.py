@@ -50,6 +50,10 @@ class RenderSettings(ConfigModel):
     width: int = Field(960, ge=16, le=8192, description="Window / offscreen width in pixels.")
     height: int = Field(540, ge=16, le=8192, description="Window / offscreen height in pixels.")
     exposure: float = Field(1.0, gt=0.0, le=64.0, description="Tone-mapping exposure.")
+    render_scale: float = Field(1.0, ge=0.25, le=1.0,
+                                description="3D views render at this fraction of the window size and are upscaled "
+                                            "when presented (the HUD stays sharp): the usual remedy for fill-bound "
+                                            "software rasterisers.")
     sky_top: Vec3 = Field((0.25, 0.45, 0.85), description="Sky colour at the zenith (linear RGB).")
     sky_horizon: Vec3 = Field((0.75, 0.85, 0.95), description="Sky colour at the horizon (linear RGB).")
     sun_direction: Vec3 = Field((0.4, 0.8, 0.3), description="Direction towards the sun.")

@@ -216,7 +216,9 @@ class Renderer:
         rect = viewport_pixels(cfg.viewport, (self.width, self.height))
         proj = projection(cfg, rect[2], rect[3])
         fov = float(np.radians(cfg.fov)) if cfg.projection == "perspective" else 0.0
-        v = View(name, rect[2], rect[3], view.astype(np.float32), proj.astype(np.float32), np.asarray(pos, np.float32),
+        scale = self.settings.render_scale  # views render at this fraction of their window size; present upscales
+        width, height = max(1, int(round(rect[2] * scale))), max(1, int(round(rect[3] * scale)))
+        v = View(name, width, height, view.astype(np.float32), proj.astype(np.float32), np.asarray(pos, np.float32),
                  np.asarray(fwd, np.float32), cfg.near, cfg.far, fov, cfg.projection == "orthographic",
                  is_main=main, camera_entity=entity)
         v.extra["rect"] = rect

@@ -4,9 +4,11 @@ PBVR per view and dust devil, as passes of the render graph:
 
 1. ``dust_devil.{e}.pbvr_clear.{view}`` creates and clears the float accumulation target (rgba16f: repeat
    counts are exact up to 2048) and a slab depth buffer;
-2. ``dust_devil.{e}.pbvr_repeat{r}.{view}``, r = 0..R-1: K random pseudo-particles around every real particle,
-   drawn as opaque points with a depth test, *added* into the accumulation target: rgb += colour, a += 1 once
-   per covered pixel (see shaders/pbvr.vert for how the depth test makes that "once per repeat");
+2. ``dust_devil.{e}.pbvr_accumulate.{view}``: R draws, r = 0..R-1, into the same target (one pass, so a
+   software rasteriser bins them together instead of flushing between repeats): K random pseudo-particles
+   around every real particle, drawn as opaque points with a depth test, *added* into the accumulation
+   target: rgb += colour, a += 1 once per covered pixel (see shaders/pbvr.vert for how the depth test makes
+   that "once per repeat");
 3. ``dust_devil.{e}.pbvr_resolve.{view}`` divides by R and composites over the view:
    colour = sum / R + scene · (1 − coverage / R) — the average of the R ensemble images.
 
@@ -78,6 +80,7 @@ class DustDevilParticles(RenderFeature):
         super().__init__(renderer)
         self._buffers: dict[int, tuple[moderngl.Buffer, dict[str, moderngl.VertexArray]]] = {}
         self._uploaded: dict[int, int] = {}  # entity -> frame index of the last upload
+        self.declared_repeats: dict[tuple[int, str], int] = {}  # (entity, view) -> R of the last declared frame
 
     def extract(self, world) -> list[DevilFrame]:
         return extract_devils(world)
@@ -142,9 +145,9 @@ class DustDevilParticles(RenderFeature):
             fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
 
         graph.add_pass(f"{prefix}.pbvr_clear.{view.name}", clear_setup, clear)
-        for r in range(devil.repeats):
-            graph.add_pass(f"{prefix}.pbvr_repeat{r}.{view.name}", self._repeat_setup(view, h),
-                           self._repeat_execute(view, devil, h, r))
+        self.declared_repeats[(devil.entity, view.name)] = devil.repeats
+        graph.add_pass(f"{prefix}.pbvr_accumulate.{view.name}", self._repeat_setup(view, h),
+                       self._repeat_execute(view, devil, h))
 
         def resolve_setup(b):
             b.read(h["acc"])
@@ -161,7 +164,7 @@ class DustDevilParticles(RenderFeature):
 
         return setup
 
-    def _repeat_execute(self, view: View, devil: DevilFrame, h: dict, r: int):
+    def _repeat_execute(self, view: View, devil: DevilFrame, h: dict):
         def execute(pc):
             fbo = self.renderer.framebuffer(pc.get(h["acc"]), pc.get(h["slab"]))
             fbo.use()
@@ -174,11 +177,12 @@ class DustDevilParticles(RenderFeature):
             scene_depth.compare_func = ""  # read raw depth values
             scene_depth.use(0)
             vao = self._vao(devil, "pbvr")
-            set_uniforms(vao.program, view_proj=view.view_proj.T.copy(), sub_particles=devil.sub_particles,
-                         repeat_index=r, frame_seed=int(self.renderer.frame_index % 2**31), radius=devil.radius,
-                         slab_depth=slab_depth(r, devil.repeats), point_size=devil.point_size,
-                         color=devil.color, scene_depth=0)
-            vao.render(moderngl.POINTS, vertices=len(devil.positions), instances=devil.sub_particles)
+            for r in range(devil.repeats):
+                set_uniforms(vao.program, view_proj=view.view_proj.T.copy(), sub_particles=devil.sub_particles,
+                             repeat_index=r, frame_seed=int(self.renderer.frame_index % 2**31), radius=devil.radius,
+                             slab_depth=slab_depth(r, devil.repeats), point_size=devil.point_size,
+                             color=devil.color, scene_depth=0)
+                vao.render(moderngl.POINTS, vertices=len(devil.positions), instances=devil.sub_particles)
             scene_depth.compare_func = compare
             ctx.disable(moderngl.BLEND | moderngl.PROGRAM_POINT_SIZE)
 

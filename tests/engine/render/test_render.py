@@ -101,3 +101,12 @@ def test_a_camera_can_hide_features_in_its_view():
     renderer.release()
     app.renderer = None
     assert "meshes.view0" in order and "meshes.view1" not in order and "terrain.view1" in order
+
+
+def test_render_scale_draws_views_smaller_and_presents_full_size():
+    app = App(SCENE)
+    app.config.render.render_scale = 0.5
+    renderer = make_renderer(app, 160, 96)
+    image = render_app(app, frames=1)
+    assert (renderer.views[0].width, renderer.views[0].height) == (80, 48)
+    assert image.size == (160, 96) and np.asarray(image).std() > 5

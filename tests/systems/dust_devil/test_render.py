@@ -91,10 +91,21 @@ def test_pbvr_mean_matches_single_pass_and_variance_falls_as_1_over_r(tmp_path, 
 
 
 def _pass_names(app, width=80, height=60) -> list[str]:
+    return _declared(app, width, height)[0]
+
+
+def _repeats(app, entity, width=80, height=60) -> int:
+    return _declared(app, width, height)[1][(entity, "view0")]
+
+
+def _declared(app, width, height):
+    """Compiled pass order and the PBVR repeats R each dust devil declared for each view."""
     renderer = make_renderer(app, width, height)
     try:
         renderer.extract(app.world)
-        return list(renderer.declare().compile().order)
+        names = list(renderer.declare().compile().order)
+        feature = next(f for f in renderer.features if f.name == "dust_devil")
+        return names, dict(feature.declared_repeats)
     finally:
         renderer.release()
         app.renderer = None
@@ -105,14 +116,14 @@ def test_repeats_drop_while_dragging_and_real_particles_hidden(tmp_path, gl_ctx)
     app.step(1)
     entity, *_ = devil(app)
     names = _pass_names(app)
-    assert sum(f"dust_devil.{entity}.pbvr_repeat" in n for n in names) == 12
+    assert f"dust_devil.{entity}.pbvr_accumulate.view0" in names and _repeats(app, entity) == 12
     assert not any(".points." in n for n in names)  # PBVR on: the real particles are not drawn
     assert f"dust_devil.{entity}.pbvr_resolve.view0" in names
     app.registry.command("dust_devil.drag")(app.world, entity, delta=(1.0, 0.0, 0.0), interactive=True)
     app.step(1)
-    assert sum(f"dust_devil.{entity}.pbvr_repeat" in n for n in _pass_names(app)) == 3
+    assert _repeats(app, entity) == 3
     app.step(2)
-    assert sum(f"dust_devil.{entity}.pbvr_repeat" in n for n in _pass_names(app)) == 12
+    assert _repeats(app, entity) == 12
 
     plain = app_for(tmp_path, name="plain", particle_count=300, prewarm_time=0.0, pbvr=False)
     plain.step(1)
