@@ -25,6 +25,7 @@ from engine.config import Color3, ConfigModel, Vec4
 __all__ = ["GrassFieldConfig", "GrassFieldState", "build_grass_field", "MAX_PLANTS"]
 
 MAX_PLANTS = 1 << 20  # grid_x * grid_z * plants_per_cell: sizes the per-plant GPU texture
+MAX_DOTS_PER_LINE = 2048  # level-3 dots along one stem or branch (sizes the level-3 mesh)
 
 
 class GrassFieldConfig(ConfigModel):
@@ -173,6 +174,20 @@ class GrassFieldConfig(ConfigModel):
         if plants > MAX_PLANTS:
             raise ValueError(f"grid_x * grid_z * plants_per_cell = {plants} plants exceeds {MAX_PLANTS}; "
                              "lower grid_x, grid_z or plants_per_cell")
+        return self
+
+    @model_validator(mode="after")
+    def _dot_budget(self) -> GrassFieldConfig:
+        """Level 3 draws one dot every dot_spacing_pixels · L / P₂₃ along the stem (table 1): a tiny L or a huge
+        P₂₃ would ask for millions of dots per stem, so the count per polyline is capped."""
+        spacing = self.dot_spacing_pixels * self.length_of_interest / self.level_thresholds[2]
+        segments = self.branch_segments + self.branch_segments_jitter
+        longest = self.base_length * (1.0 + self.base_length_jitter) * segments * max(1.0, self.branch_length_ratio)
+        if longest / spacing > MAX_DOTS_PER_LINE:
+            raise ValueError(f"level-3 dots every dot_spacing_pixels · length_of_interest / level_thresholds[2] = "
+                             f"{spacing:.3g} world units along stems up to {longest:.3g} long make "
+                             f"{longest / spacing:.0f} dots per stem, more than {MAX_DOTS_PER_LINE}; raise "
+                             "length_of_interest or dot_spacing_pixels, or lower level_thresholds[2]")
         return self
 
     @property

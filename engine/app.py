@@ -19,7 +19,8 @@ from pathlib import Path
 from typing import Any
 
 from engine.builtin import InputSource
-from engine.registry import Registry, default_registry
+from engine.config import ConfigError, Problem
+from engine.registry import Registry, RegistryError, default_registry
 from engine.scene import SceneConfig, ScenePlan, plan_scene, read_scene, spawn_plan
 from engine.schedule import FRAME_STAGES, TICK_STAGES, FixedClock, Stage
 from engine.script import ScriptRuntime
@@ -27,6 +28,7 @@ from engine.state import Snapshot, restore, snapshot, state_hash
 from engine.world import World
 
 log = logging.getLogger("engine")
+MAX_SEED = 2**63 - 1  # the [scene] seed's range (engine/scene.py)
 
 
 @dataclass
@@ -43,9 +45,11 @@ class App:
     def __init__(self, scene: str | Path | None = None, *, registry: Registry | None = None,
                  seed: int | None = None, strict: bool = False, configs_root: Path | None = None) -> None:
         self.scene_path = Path(scene) if scene is not None else None
-        settings = read_scene(self.scene_path)[0] if self.scene_path else SceneConfig()
+        if seed is not None and not (isinstance(seed, int) and 0 <= seed <= MAX_SEED):
+            raise ConfigError([Problem("<arguments>", "seed", f"expected an integer in [0, {MAX_SEED}]", seed)])
+        settings = self._read_settings(registry, configs_root) if self.scene_path else SceneConfig()
         self.config: SceneConfig = settings
-        self.registry = registry or default_registry(settings.scene.plugins)
+        self.registry = registry or self._registry_for(settings)
         self.plan: ScenePlan | None = None
         if self.scene_path is not None:
             self.plan = plan_scene(self.scene_path, self.registry, configs_root)
@@ -60,6 +64,22 @@ class App:
         self.started = False
         self.frame_hooks: list[Callable[[App], None]] = []
         self.pre_tick: list[Callable[[App], None]] = []
+
+    def _read_settings(self, registry: Registry | None, configs_root: Path | None) -> SceneConfig:
+        """The scene's settings (they name the plugins); when they are bad, every problem of the file is
+        reported at once, not only those of the ``[scene]`` table."""
+        try:
+            return read_scene(self.scene_path)[0]
+        except ConfigError:
+            plan_scene(self.scene_path, registry or default_registry(), configs_root)  # raises with them all
+            raise
+
+    def _registry_for(self, settings: SceneConfig) -> Registry:
+        try:
+            return default_registry(settings.scene.plugins)
+        except RegistryError as exc:  # an unknown name in [scene] plugins
+            raise ConfigError([Problem(str(self.scene_path or "<scene>"), "scene.plugins", str(exc),
+                                       settings.scene.plugins)]) from None
 
     def _new_world(self) -> World:
         world = World(self.seed)

@@ -6,16 +6,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Literal
 
 import numpy as np
-from pydantic import AfterValidator, Field
+from pydantic import AfterValidator, Field, ValidationInfo, field_validator
 
 from engine.collider import Collider
 from typing import Annotated
 
 from engine.config import ConfigModel, Vec3, _as_tuple
-from engine.heightfield import HeightField, load_heightmap_png, midpoint_displacement
+from engine.heightfield import HeightField, inspect_heightmap, load_heightmap_png, midpoint_displacement
 from engine.input import InputQueue, InputState
 from engine.registry import BuildContext, Registry
 from engine.schedule import Stage
@@ -31,6 +32,8 @@ class Name:
     value: str
 
 
+HalfExtents3 = Annotated[list[Annotated[float, Field(ge=0.0, le=10000.0)]], Field(min_length=3, max_length=3),
+                         AfterValidator(_as_tuple)]
 Scale3 = Annotated[list[Annotated[float, Field(ge=0.001, le=1000.0)]], Field(min_length=3, max_length=3),
                    AfterValidator(_as_tuple)]
 
@@ -53,12 +56,20 @@ class ColliderConfig(ConfigModel):
     """A collision shape queried by effects (energy-wave hits, water bodies, dust particles)."""
 
     shape: Literal["box", "sphere", "plane"] = Field("box", description="Shape kind (height fields come from Terrain).")
-    half_extents: Vec3 = Field((0.5, 0.5, 0.5), description="Box half sizes in local units.")
+    half_extents: HalfExtents3 = Field((0.5, 0.5, 0.5),
+                                       description="Box half sizes in local units; each in [0, 10000].")
     radius: float = Field(0.5, gt=0.0, le=10000.0, description="Sphere radius in local units.")
     normal: Vec3 = Field((0.0, 1.0, 0.0), description="Plane normal (local); the solid side is below.")
     offset: float = Field(0.0, ge=-1e6, le=1e6, description="Plane offset along its normal.")
     layer: str = Field("default", max_length=64, description="Collision layer name.")
     is_trigger: bool = Field(False, description="Reports hits but effects pass through.")
+
+    @field_validator("normal")
+    @classmethod
+    def _nonzero_normal(cls, normal: tuple[float, ...]) -> tuple[float, ...]:
+        if math.sqrt(sum(x * x for x in normal)) < 1e-9:
+            raise ValueError("expected a non-zero direction")
+        return normal
 
 
 def _build_collider(cfg: ColliderConfig, ctx: BuildContext) -> Collider:
@@ -80,6 +91,29 @@ class TerrainConfig(ConfigModel):
     colors: list[Vec3] = Field([(0.07, 0.15, 0.04), (0.13, 0.22, 0.06), (0.28, 0.24, 0.16), (0.75, 0.75, 0.75)],
                                min_length=2, max_length=8, description="Colour ramp from low to high.")
     centered: bool = Field(True, description="Centre the terrain on the entity's position.")
+
+    @field_validator("heightmap")
+    @classmethod
+    def _heightmap_file(cls, value: str | None, info: ValidationInfo) -> str | None:
+        """The PNG must lie inside the configs root and be a grayscale image of a sane size; checked when the
+        file is validated (the loaders pass ``configs_root`` as validation context) rather than at spawn."""
+        if value is None:
+            return value
+        from engine.config import resolve_inside
+
+        root = (info.context or {}).get("configs_root")
+        if root is None:  # validated alone: only what the text itself shows
+            if value.startswith(("/", "\\")) or ":" in value or ".." in Path(value).parts:
+                raise ValueError(f"path '{value}' must be relative to the configs root and stay inside it")
+            return value
+        path = resolve_inside(root, value)  # ValueError names the escape
+        try:
+            inspect_heightmap(path)
+        except FileNotFoundError:
+            raise ValueError(f"height map not found: {path}") from None
+        if path.suffix.lower() != ".png":
+            raise ValueError(f"height map '{path}' must be a .png file")
+        return value
 
 
 @dataclass

@@ -5,11 +5,27 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
 import sys
+import traceback
 from pathlib import Path
 
 from engine.config import ConfigError, Problem, read_toml, validate
 from engine.registry import Registry, RegistryError, default_registry
+from engine.script import ScriptError
+
+
+def _int_in(low: int, high: int):
+    """An argparse type: a whole number in [low, high] (argparse turns the ValueError into a usage error)."""
+
+    def parse(text: str) -> int:
+        value = int(text)
+        if not low <= value <= high:
+            raise ValueError(text)
+        return value
+
+    parse.__name__ = f"whole number in [{low}, {high}]"
+    return parse
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -20,8 +36,8 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument("scene")
     run.add_argument("--headless", action="store_true", help="force offscreen EGL rendering")
     run.add_argument("--no-render", action="store_true", help="simulate only, no GL at all")
-    run.add_argument("--steps", type=int, default=None, help="run exactly N fixed ticks, then exit")
-    run.add_argument("--seed", type=int, default=None)
+    run.add_argument("--steps", type=_int_in(0, 10**9), default=None, help="run exactly N fixed ticks, then exit")
+    run.add_argument("--seed", type=_int_in(0, 2**63 - 1), default=None)
     run.add_argument("--hash", action="store_true", help="print the final state hash as the last line")
     run.add_argument("--record", type=Path, help="record per-tick input to FILE")
     run.add_argument("--replay", type=Path, help="replay per-tick input from FILE")
@@ -30,7 +46,7 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument("--screenshot", type=Path, help="write the last frame to PATH (PNG)")
     run.add_argument("--screenshot-every", nargs=2, metavar=("N", "DIR"), help="write every N-th frame to DIR")
     run.add_argument("--profile", action="store_true", help="print per-pass timings at exit")
-    run.add_argument("--size", nargs=2, type=int, metavar=("W", "H"), help="override the render size")
+    run.add_argument("--size", nargs=2, type=_int_in(16, 8192), metavar=("W", "H"), help="override the render size")
 
     val = sub.add_parser("validate", help="validate scenes and presets")
     val.add_argument("paths", nargs="+", type=Path)
@@ -44,7 +60,7 @@ def main(argv: list[str] | None = None) -> int:
     gal = sub.add_parser("gallery", help="render every preset in configs/effects/ headless to a PNG")
     gal.add_argument("--out", type=Path, default=Path("docs/gallery"))
     gal.add_argument("--configs", type=Path, default=Path("configs"))
-    gal.add_argument("--size", nargs=2, type=int, default=(320, 200), metavar=("W", "H"))
+    gal.add_argument("--size", nargs=2, type=_int_in(16, 8192), default=(320, 200), metavar=("W", "H"))
     gal.add_argument("--only", help="only presets whose path contains this text")
 
     gr = sub.add_parser("graph", help="print the compiled render graph of a scene")
@@ -83,14 +99,36 @@ def main(argv: list[str] | None = None) -> int:
     except RegistryError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1
+    except ScriptError as exc:  # --strict: the script's error, with the script's own traceback (README)
+        cause = "".join(traceback.format_exception(exc.__cause__)) if exc.__cause__ else ""
+        print(f"{cause}error: {exc}", file=sys.stderr)
+        return 1
+    except Exception as exc:  # noqa: BLE001 - the last resort: a sentence for people, the traceback on request
+        return _unexpected(exc)
     return 0
+
+
+def _unexpected(exc: Exception) -> int:
+    """Report an exception no handler above expected, without a traceback (``ECSFX_TRACEBACK=1`` shows it)."""
+    if os.environ.get("ECSFX_TRACEBACK"):
+        raise exc
+    frontend = sys.modules.get("engine.render.frontend")
+    if isinstance(exc, OSError) or (frontend is not None and isinstance(exc, frontend.ContextError)):
+        print(f"error: {exc}", file=sys.stderr)  # an unwritable path, no OpenGL: the user's to fix
+        return 1
+    print(f"internal error: {type(exc).__name__}: {exc}\n(a bug in the engine or a plugin; set ECSFX_TRACEBACK=1 "
+          "to see the traceback)", file=sys.stderr)
+    return 2
 
 
 def _toml_files(paths: list[Path]) -> tuple[list[Path], list[Problem]]:
     files, problems = [], []
     for path in paths:
         if path.is_dir():
-            files.extend(sorted(path.rglob("*.toml")))
+            found = sorted(path.rglob("*.toml"))
+            if not found:
+                problems.append(Problem(str(path), "", "no .toml files in this directory"))
+            files.extend(found)
         elif path.is_file():
             files.append(path)
         else:
@@ -116,7 +154,7 @@ def validate_file(path: Path, registry: Registry):
         if spec is None:
             raise ConfigError([Problem(str(path), "", f"no registered component keeps presets in "
                                                       f"'{path.parent.name}/'")])
-        return validate(spec.model, data, str(path), (), text)
+        return validate(spec.model, data, str(path), (), text, context={"configs_root": path.parent.parent.parent})
     elif "entities" in data or "scene" in data or path.parent.name == "scenes":
         return plan_scene(path, registry)
     else:
@@ -127,15 +165,16 @@ def validate_file(path: Path, registry: Registry):
 def validate_command(paths: list[Path]) -> int:
     registry = default_registry()
     files, problems = _toml_files(paths)
+    failed = 0
     for path in files:
         try:
             validate_file(path, registry)
         except ConfigError as exc:
             problems.extend(exc.problems)
+            failed += 1
     for p in problems:
         print(p, file=sys.stderr)
-    bad = len({p.file for p in problems})
-    print(f"validated {len(files)} file(s): {len(files) - bad if bad <= len(files) else 0} ok, {bad} with problems")
+    print(f"validated {len(files)} file(s): {len(files) - failed} ok, {failed} with problems")
     return 1 if problems else 0
 
 

@@ -24,18 +24,21 @@ else:  # pragma: no cover - exercised on 3.10 only
 
 
 class ConfigModel(BaseModel):
-    """Base of every config a modder writes: unknown keys are errors, strings never pass as numbers."""
+    """Base of every config a modder writes: unknown keys are errors, strings never pass as numbers, and
+    TOML's ``nan`` / ``inf`` never pass as a float (they would poison a simulation without an error)."""
 
-    model_config = ConfigDict(extra="forbid", strict=True)
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
 
 
 def _as_tuple(v: list[float]) -> tuple[float, ...]:
     return tuple(float(x) for x in v)
 
 
-Vec2 = Annotated[list[float], Field(min_length=2, max_length=2), AfterValidator(_as_tuple)]
-Vec3 = Annotated[list[float], Field(min_length=3, max_length=3), AfterValidator(_as_tuple)]
-Vec4 = Annotated[list[float], Field(min_length=4, max_length=4), AfterValidator(_as_tuple)]
+COORD_LIMIT = 1.0e6  # |component| of any vector a modder writes: metres, m/s, degrees, fractions alike
+Coord = Annotated[float, Field(ge=-COORD_LIMIT, le=COORD_LIMIT)]
+Vec2 = Annotated[list[Coord], Field(min_length=2, max_length=2), AfterValidator(_as_tuple)]
+Vec3 = Annotated[list[Coord], Field(min_length=3, max_length=3), AfterValidator(_as_tuple)]
+Vec4 = Annotated[list[Coord], Field(min_length=4, max_length=4), AfterValidator(_as_tuple)]
 Color3 = Annotated[list[Annotated[float, Field(ge=0.0, le=64.0)]], Field(min_length=3, max_length=3),
                    AfterValidator(_as_tuple)]
 
@@ -186,6 +189,8 @@ def model_problems(exc: ValidationError, model: type[BaseModel], file: str, pref
             suggestion = suggest(str(err.get("input")), opts) if opts else None
         else:
             message = message.replace("Input should be", "expected")
+            if err["type"] in ("value_error", "assertion_error"):  # a validator's own words, without pydantic's prefix
+                message = re.sub(r"^(Value error|Assertion failed), ", "", message)
         line = locate_line(text, list(text_prefix if text_prefix is not None else prefix) + loc) if text else None
         value = err.get("input") if err["type"] not in ("missing",) else None
         if err["type"] == "extra_forbidden" or isinstance(value, dict):
@@ -220,10 +225,13 @@ def _model_in(annotation: Any) -> Any:
 
 
 def validate(model: type[BaseModel], data: Any, file: str, prefix: Sequence[Any] = (),
-             text: str | None = None) -> BaseModel:
-    """Validate ``data`` against ``model``; raise :class:`ConfigError` with every problem."""
+             text: str | None = None, context: dict | None = None) -> BaseModel:
+    """Validate ``data`` against ``model``; raise :class:`ConfigError` with every problem.
+
+    ``context`` reaches the model's validators as ``info.context`` (``fixed_dt``, ``configs_root``).
+    """
     try:
-        return model.model_validate(data)
+        return model.model_validate(data, context=context)
     except ValidationError as exc:
         raise ConfigError(model_problems(exc, model, file, prefix, text)) from None
 

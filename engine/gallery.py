@@ -16,7 +16,7 @@ import re
 import tempfile
 from pathlib import Path
 
-from engine.config import ConfigError
+from engine.config import ConfigError, Problem, suggest
 from engine.registry import default_registry
 
 log = logging.getLogger("engine.gallery")
@@ -88,43 +88,72 @@ def gallery_command(args: argparse.Namespace) -> int:
     registry = default_registry()
     configs = args.configs.resolve()
     out = args.out
+    presets = _selected_presets(configs, registry, args.only)
     ctx = create_headless_context()
     entries, failures = [], []
-    for preset in sorted((configs / "effects").glob("*/*.toml")):
-        rel = f"{preset.parent.name}/{preset.stem}"
-        if args.only and args.only not in rel:
-            continue
-        spec = registry.preset_component(preset.parent.name)
-        if spec is None:
-            continue
-        text = _template(configs, preset)
-        steps = 90
-        for line in text.splitlines() + preset.read_text(encoding="utf-8").splitlines():
-            if line.startswith("#:gallery-steps"):  # the preset's own line comes last and wins
-                steps = int(line.split()[-1])
-        text = text.replace("@COMPONENT@", spec.name).replace("@PRESET@", rel)
-        text = re.sub(rf'preset\s*=\s*"{re.escape(preset.parent.name)}/[^"]*"', f'preset = "{rel}"', text)
-        with tempfile.NamedTemporaryFile("w", suffix=".toml", dir=configs / "scenes", delete=False) as fh:
-            fh.write(text)
-            scene = Path(fh.name)
-        try:
-            app = App(scene, configs_root=configs)
-            renderer = Renderer(app, ctx, *args.size)
-            app.step(steps)
-            app.render_frame()
-            target = out / preset.parent.name / f"{preset.stem}.png"
-            renderer.save_screenshot(target)
-            renderer.release()
-            entries.append((rel, target, preset_title(preset)))
-            print(f"rendered {rel} -> {target}")
-        except ConfigError as exc:
-            failures.append(f"{rel}: {exc}")
-        finally:
-            scene.unlink(missing_ok=True)
+    with tempfile.TemporaryDirectory(prefix="ecsfx-gallery-") as stage:
+        for preset, spec in presets:
+            rel = f"{preset.parent.name}/{preset.stem}"
+            try:
+                text = _template(configs, preset)
+                steps = _gallery_steps(text, configs / "gallery", preset)
+                text = text.replace("@COMPONENT@", spec.name).replace("@PRESET@", rel)
+                text = re.sub(rf'preset\s*=\s*"{re.escape(preset.parent.name)}/[^"]*"', f'preset = "{rel}"', text)
+                scene = Path(stage) / f"{preset.parent.name}__{preset.stem}.toml"
+                scene.write_text(text, encoding="utf-8")
+                app = App(scene, configs_root=configs)
+                renderer = Renderer(app, ctx, *args.size)
+                app.step(steps)
+                app.render_frame()
+                target = out / preset.parent.name / f"{preset.stem}.png"
+                renderer.save_screenshot(target)
+                renderer.release()
+                entries.append((rel, target, preset_title(preset)))
+                print(f"rendered {rel} -> {target}")
+            except (ConfigError, UnicodeDecodeError) as exc:
+                failures.append(f"{rel}: {exc}")
     _write_index(out, entries)
     for failure in failures:
         print(failure)
     return 1 if failures else 0
+
+
+def _selected_presets(configs: Path, registry, only: str | None) -> list[tuple[Path, object]]:
+    """The presets to render (with their component spec); a wrong folder or an ``--only`` that matches
+    nothing is an error, not an empty gallery."""
+    effects = configs / "effects"
+    if not effects.is_dir():
+        raise ConfigError([Problem(str(effects), "--configs", "no effects/ folder here: expected the configs "
+                                                              "root (the folder holding effects/ and scenes/)")])
+    found = []
+    for preset in sorted(effects.glob("*/*.toml")):
+        spec = registry.preset_component(preset.parent.name)
+        if spec is not None:
+            found.append((preset, spec))
+    if only:
+        names = [f"{p.parent.name}/{p.stem}" for p, _ in found]
+        selected = [(p, spec) for (p, spec), name in zip(found, names) if only in name]
+        if not selected:
+            raise ConfigError([Problem(str(effects), "--only", f"no preset matches (available: {', '.join(names)})",
+                                       only, suggest(only, names))])
+        return selected
+    if not found:
+        raise ConfigError([Problem(str(effects), "", "no presets of a registered component here")])
+    return found
+
+
+def _gallery_steps(template: str, template_dir: Path, preset: Path) -> int:
+    """Ticks simulated before the picture: ``#:gallery-steps N`` (the preset's own line wins)."""
+    steps = 90
+    for file, text in ((template_dir, template), (preset, preset.read_text(encoding="utf-8"))):
+        for number, line in enumerate(text.splitlines(), start=1):
+            if line.startswith("#:gallery-steps"):
+                value = line.split()[-1]
+                if not value.isdigit() or not 0 <= int(value) <= 100_000:
+                    raise ConfigError([Problem(str(file), "#:gallery-steps", "expected a whole number of ticks "
+                                               "in [0, 100000]", value, line=number if file == preset else None)])
+                steps = int(value)
+    return steps
 
 
 def _write_index(out: Path, entries: list[tuple[str, Path, str]]) -> None:

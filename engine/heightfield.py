@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from PIL import Image, UnidentifiedImageError
 
-__all__ = ["HeightField", "load_heightmap_png", "midpoint_displacement"]
+__all__ = ["HeightField", "MAX_HEIGHTMAP_SIDE", "inspect_heightmap", "load_heightmap_png", "midpoint_displacement"]
 
 F64 = NDArray[np.float64]
 
@@ -143,29 +143,47 @@ def midpoint_displacement(n: int, roughness: float, amplitude: float, rng: np.ra
 
 
 _GRAY_SCALES = {"L": 255.0, "LA": 255.0, "I;16": 65535.0, "I;16L": 65535.0, "I;16B": 65535.0, "I": 65535.0}
+MAX_HEIGHTMAP_SIDE = 4097  # pixels per side (2^12 + 1): 134 MB of float64 heights at most
+
+
+def inspect_heightmap(path: str | Path) -> tuple[str, tuple[int, int]]:
+    """The image mode and (width, height) of a height map, read from its header only (cheap: no pixels decoded).
+
+    Raises ``FileNotFoundError`` when the file does not exist and ``ValueError`` when it is not an image, not
+    grayscale, smaller than 2×2 or larger than :data:`MAX_HEIGHTMAP_SIDE` per side, naming the path each time.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"height map '{path}' not found")
+    try:
+        with Image.open(path) as image:
+            mode, size = image.mode, image.size
+    except (UnidentifiedImageError, Image.DecompressionBombError, OSError) as error:
+        raise ValueError(f"height map '{path}' is not a readable image: {error}") from None
+    if mode not in _GRAY_SCALES:
+        raise ValueError(f"height map '{path}' has image mode {mode!r}; expected 8-bit ('L') or 16-bit ('I;16') "
+                         "grayscale, convert it to grayscale first")
+    if min(size) < 2 or max(size) > MAX_HEIGHTMAP_SIDE:
+        raise ValueError(f"height map '{path}' is {size[0]}×{size[1]} pixels; expected 2 to {MAX_HEIGHTMAP_SIDE} "
+                         "pixels per side")
+    return mode, size
 
 
 def load_heightmap_png(path: str | Path, height_scale: float = 1.0) -> F64:
     """Read an 8- or 16-bit grayscale image as heights in [0, height_scale]: height = value / max_value · scale.
 
     Image row = z (row index of the result), column = x. Raises ``FileNotFoundError`` when the file does not
-    exist and ``ValueError`` when it is not an image or not grayscale, naming the path either way.
+    exist and ``ValueError`` when it is not a readable grayscale image of a sane size (see
+    :func:`inspect_heightmap`), naming the path either way.
     """
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"height map '{path}' not found (resolved to '{path.resolve()}')")
+    mode, _ = inspect_heightmap(path)
     try:
         with Image.open(path) as image:
             image.load()
-            mode = image.mode
-            if mode not in _GRAY_SCALES:
-                raise ValueError(
-                    f"height map '{path}' has image mode {mode!r}; expected 8-bit ('L') or 16-bit ('I;16') "
-                    "grayscale, convert it to grayscale first"
-                )
             if mode == "LA":
                 image = image.getchannel("L")
             values = np.asarray(image, dtype=np.float64)
-    except UnidentifiedImageError as error:
-        raise ValueError(f"height map '{path}' is not a readable image: {error}") from error
+    except (UnidentifiedImageError, Image.DecompressionBombError, OSError) as error:
+        raise ValueError(f"height map '{path}' is not a readable image: {error}") from None
     return values * (float(height_scale) / _GRAY_SCALES[mode])

@@ -110,16 +110,32 @@ class InputReplay:
     """Feeds recorded events back at the ticks they were recorded at."""
 
     def __init__(self, path: Path) -> None:
-        lines = Path(path).read_text(encoding="utf-8").splitlines()
+        """Read a recording; a file that is not one raises ``ValueError`` naming the file and the line."""
+        try:
+            lines = Path(path).read_text(encoding="utf-8").splitlines()
+        except UnicodeDecodeError as exc:
+            raise ValueError(f"{path}: not an input recording (not UTF-8 text: {exc})") from None
         if not lines:
             raise ValueError(f"{path}: empty input recording")
-        self.meta = json.loads(lines[0])
-        if self.meta.get("format") != "ecsfx-input/1":
-            raise ValueError(f"{path}: not an input recording (format {self.meta.get('format')!r})")
+        self.meta = _json_line(path, 1, lines[0])
+        if not isinstance(self.meta, dict) or self.meta.get("format") != "ecsfx-input/1":
+            found = self.meta.get("format") if isinstance(self.meta, dict) else self.meta
+            raise ValueError(f"{path}:1: not an input recording (expected format 'ecsfx-input/1', got {found!r})")
         self.ticks: dict[int, list[InputEvent]] = {}
-        for line in lines[1:]:
-            item = json.loads(line)
-            self.ticks[int(item["tick"])] = [InputEvent(**e) for e in item["events"]]
+        for number, line in enumerate(lines[1:], start=2):
+            item = _json_line(path, number, line)
+            try:
+                self.ticks[int(item["tick"])] = [InputEvent(**e) for e in item["events"]]
+            except (KeyError, TypeError, ValueError) as exc:
+                raise ValueError(f"{path}:{number}: expected {{\"tick\": N, \"events\": [...]}} with events like "
+                                 f"{{\"kind\": \"key_down\", \"key\": \"w\"}} ({type(exc).__name__}: {exc})") from None
 
     def events_for(self, tick: int) -> list[InputEvent]:
         return self.ticks.get(tick, [])
+
+
+def _json_line(path: Path, number: int, line: str) -> Any:
+    try:
+        return json.loads(line)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{path}:{number}: not an input recording (invalid JSON: {exc.msg})") from None

@@ -13,9 +13,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from engine.config import ConfigError, Problem, model_problems, read_toml, resolve_inside
+from engine.config import ConfigError, Problem, model_problems, read_toml, resolve_inside, suggest
 from engine.registry import BuildContext, Registry
-from engine.scene import EntityConfig, EntityPlan, _load_script, load_component
+from engine.scene import EntityConfig, EntityPlan, build_problem, plan_entity
 
 if TYPE_CHECKING:
     from engine.app import App
@@ -50,30 +50,23 @@ class PrefabLibrary:
         try:
             path = resolve_inside(self.root / "prefabs", name, ".toml")
         except ValueError as exc:
-            raise ConfigError([Problem(name, "", str(exc))]) from None
+            raise ConfigError([Problem(str(self.root / "prefabs"), "", str(exc), value=name)]) from None
         if not path.is_file():
             available = sorted(p.stem for p in (self.root / "prefabs").glob("*.toml"))
-            raise ConfigError([Problem(str(path), "", f"prefab not found (available: {', '.join(available) or 'none'})")])
+            raise ConfigError([Problem(str(path), "", f"prefab not found (available: {', '.join(available) or 'none'})",
+                                       value=name, suggestion=suggest(name, available))])
         data, text = read_toml(path)
+        problems = []
         try:
             ent = EntityConfig.model_validate(data)
         except ValidationError as exc:
-            raise ConfigError(model_problems(exc, EntityConfig, str(path), (), text)) from None
-        registry = self.registry
-        comps, scripts, problems = [], [], []
-        for cname, values in ent.components.items():
-            try:
-                comps.append((cname, load_component(registry, cname, values, path, text, ("components", cname),
-                                                    self.root)))
-            except ConfigError as exc:
-                problems.extend(exc.problems)
-        for j, ref in enumerate(ent.scripts):
-            try:
-                scripts.append((*_load_script(registry, ref, path, text, ("scripts", j)), ref.enabled))
-            except ConfigError as exc:
-                problems.extend(exc.problems)
+            problems.extend(model_problems(exc, EntityConfig, str(path), (), text))
+        planned, found = plan_entity(self.registry, data, path, text, (), self.root,
+                                     context={"configs_root": self.root})
+        problems.extend(found)
         if problems:
             raise ConfigError(problems)
+        comps, scripts = planned.components, planned.scripts
         plan = EntityPlan(ent.name or name, comps, scripts)
         self._plans[name] = plan
         return plan
@@ -87,9 +80,16 @@ class PrefabLibrary:
         plan = self.plan(name)
         entity = world.reserve()
         built: list[Any] = [Name(plan.name)]
-        ctx = BuildContext(world, entity, plan.name, str(self.root / "prefabs" / f"{name}.toml"), self.root)
+        file = str(self.root / "prefabs" / f"{name}.toml")
+        ctx = BuildContext(world, entity, plan.name, file, self.root)
+        problems = []
         for cname, cfg in plan.components:
-            built += self.registry.component(cname).instantiate(cfg, ctx)
+            try:
+                built += self.registry.component(cname).instantiate(cfg, ctx)
+            except Exception as exc:  # reported like a bad file; nothing is spawned
+                problems.append(build_problem(file, f"components.{cname}", exc))
+        if problems:
+            raise ConfigError(problems)
         if position is not None:
             transform = next((c for c in built if isinstance(c, Transform)), None)
             if transform is None:

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from engine.config import ConfigError
-from engine.scene import EntityRecord, build_component, plan_scene, spawn_entity
+from engine.scene import EntityRecord, build_component, build_problem, plan_scene, spawn_entity
 from engine.script import Scripts, make_slot
 
 if TYPE_CHECKING:
@@ -87,7 +87,12 @@ class HotReloader:
             log.error("reload failed; keeping the last good config:\n%s", exc)
             return False
         self.status.errors = []
-        changes = self._apply(plan)
+        try:
+            changes = self._apply(plan)
+        except Exception as exc:  # noqa: BLE001 - a plugin's hook failing must not take the game down
+            log.error("reload of %s failed while applying", plan.file, exc_info=exc)
+            self.status.errors.append(f"{plan.file}: reload failed while applying: {type(exc).__name__}: {exc}")
+            changes = ["reload failed while applying; see the errors"]
         self._watch(plan.files)
         app.plan = plan
         self.status.reloads += 1
@@ -104,17 +109,23 @@ class HotReloader:
         for i, ent in enumerate(plan.entities):
             old = old_records[i] if i < len(old_records) else None
             if old is None or old.name != ent.name or not world.alive(old.entity):
+                try:  # build the new entity first: if it fails, the old one stays
+                    record = spawn_entity(world, app.registry, plan, i, ent)
+                except ConfigError as exc:
+                    self.status.errors.extend(str(p) for p in exc.problems)
+                    changes.append(f"entities[{i}] '{ent.name}': spawn failed"
+                                   + (f", kept '{old.name}'" if old is not None and world.alive(old.entity) else ""))
+                    if old is not None and world.alive(old.entity):
+                        records.append(old)
+                    continue
                 if old is not None and world.alive(old.entity):
                     world.despawn(old.entity)
                     changes.append(f"despawned '{old.name}'")
-                try:
-                    records.append(spawn_entity(world, app.registry, plan, i, ent))
-                    changes.append(f"spawned '{ent.name}'")
-                except ConfigError as exc:
-                    self.status.errors.extend(str(p) for p in exc.problems)
+                records.append(record)
+                changes.append(f"spawned '{ent.name}'")
                 continue
             records.append(old)
-            changes += self._apply_components(plan, old, ent)
+            changes += self._apply_components(plan, i, old, ent)
             changes += self._apply_scripts(old, ent)
         for old in old_records[len(plan.entities):]:
             if world.alive(old.entity):
@@ -123,7 +134,7 @@ class HotReloader:
         app.records = records
         return changes
 
-    def _apply_components(self, plan, record: EntityRecord, ent) -> list[str]:
+    def _apply_components(self, plan, index: int, record: EntityRecord, ent) -> list[str]:
         world, registry = self.app.world, self.app.registry
         changes = []
         new_names = {cname for cname, _ in ent.components}
@@ -137,14 +148,22 @@ class HotReloader:
             if old is not None and old[0] == cfg:
                 continue
             spec = registry.component(cname)
-            if old is not None and self._swap_in_place(spec, old, cfg, record.entity):
+            key = f"entities[{index}].components.{cname}"
+            try:
+                swapped = old is not None and self._swap_in_place(spec, old, cfg, record.entity)
+            except Exception as exc:  # noqa: BLE001 - a live_update hook raised: put the old config back
+                world.add(record.entity, old[0])
+                self.status.errors.append(str(build_problem(plan.file, key, exc)))
+                changes.append(f"{record.name}.{cname}: update failed, kept the old one")
+                continue
+            if swapped:
                 record.components[cname] = (cfg, old[1])
                 changes.append(f"{record.name}.{cname}: parameters updated ({', '.join(_diff(old[0], cfg))})")
                 continue
             try:
                 built = build_component(world, registry, plan, record.entity, record.name, cname, cfg)
-            except (ValueError, OSError) as exc:  # the old component stays in force
-                self.status.errors.append(f"{plan.file}: {record.name}.{cname}: cannot rebuild: {exc}")
+            except Exception as exc:  # noqa: BLE001 - the old component stays in force
+                self.status.errors.append(str(build_problem(plan.file, key, exc)))
                 changes.append(f"{record.name}.{cname}: rebuild failed, kept the old one")
                 continue
             types = [type(c) for c in built]

@@ -31,6 +31,11 @@ def attach_input_source(app: App, record: Path | None, replay: Path | None) -> I
 
 
 def run_command(args: argparse.Namespace) -> int:
+    every = getattr(args, "screenshot_every", None)
+    if every and not (every[0].isdigit() and int(every[0]) >= 1):
+        print(f"error: --screenshot-every N DIR: N must be a whole number of frames >= 1, got {every[0]!r}",
+              file=sys.stderr)
+        return 1
     app = App(args.scene, seed=args.seed, strict=args.strict)
     if args.print_schedule:
         print(app.schedule.describe(app.clock.dt))

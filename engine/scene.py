@@ -19,6 +19,7 @@ without problems is spawned, so a bad edit never leaves a half-built world.
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -32,6 +33,8 @@ from engine.script import Scripts, make_slot
 from engine.world import World
 
 from pydantic import ValidationError
+
+log = logging.getLogger("engine.scene")
 
 
 class ScriptRef(ConfigModel):
@@ -114,32 +117,72 @@ def read_scene(path: str | Path) -> tuple[SceneConfig, dict, str]:
 
 
 def plan_scene(path: str | Path, registry: Registry, configs_root: Path | None = None) -> ScenePlan:
-    """Validate a scene and every preset it names; raise one ConfigError listing all problems."""
+    """Validate a scene and every preset it names; raise one ConfigError listing all problems.
+
+    A problem in the scene's shape (say a bad ``[scene]`` key) does not hide the problems inside the
+    entities: every entity table that can be read is checked too.
+    """
     path = Path(path)
-    config, raw, text = read_scene(path)
+    data, text = read_toml(path)
     root = Path(configs_root) if configs_root else find_configs_root(path)
-    plan = ScenePlan(path, root, config, files=[path])
     problems: list[Problem] = []
-    for i, ent in enumerate(config.entities):
-        comps = []
-        for cname, values in ent.components.items():
-            key = ("entities", i, "components", cname)
-            try:
-                comps.append((cname, load_component(registry, cname, values, path, text, key, root, plan.files,
-                                                    {"fixed_dt": config.scene.fixed_dt})))
-            except ConfigError as exc:
-                problems.extend(exc.problems)
-        scripts = []
-        for j, ref in enumerate(ent.scripts):
-            key = ("entities", i, "scripts", j)
-            try:
-                scripts.append((*_load_script(registry, ref, path, text, key), ref.enabled))
-            except ConfigError as exc:
-                problems.extend(exc.problems)
-        plan.entities.append(EntityPlan(ent.name, comps, scripts))
-    if problems:
+    config: SceneConfig | None = None
+    try:
+        config = SceneConfig.model_validate(data)
+    except ValidationError as exc:
+        problems.extend(model_problems(exc, SceneConfig, str(path), (), text))
+    context: dict[str, Any] = {"configs_root": root}
+    settings = config.scene if config is not None else _valid_or_none(SceneSettings, data.get("scene", {}))
+    if settings is not None:
+        context["fixed_dt"] = settings.fixed_dt
+    files = [path]
+    raw_entities = data.get("entities", [])
+    entities = []
+    for i, raw in enumerate(raw_entities if isinstance(raw_entities, list) else []):
+        if isinstance(raw, dict):
+            ent, found = plan_entity(registry, raw, path, text, ("entities", i), root, files, context)
+            entities.append(ent)
+            problems.extend(found)
+    if problems or config is None:
         raise ConfigError(problems)
-    return plan
+    return ScenePlan(path, root, config, entities, files)
+
+
+def _valid_or_none(model: type[ConfigModel], data: Any) -> Any:
+    try:
+        return model.model_validate(data)
+    except ValidationError:
+        return None
+
+
+def plan_entity(registry: Registry, raw: dict, file: Path, text: str, key: tuple, root: Path,
+                files: list[Path] | None = None, context: dict | None = None) -> tuple[EntityPlan, list[Problem]]:
+    """Check the components (with their presets) and scripts of one entity table; returns the plan and the
+    problems found.  The table's own shape (``name``, unknown keys) is the caller's model's job, so each
+    problem is reported once."""
+    problems: list[Problem] = []
+    comps = []
+    components = raw.get("components", {})
+    for cname, values in (components.items() if isinstance(components, dict) else ()):
+        if not isinstance(values, dict):
+            continue  # reported by EntityConfig
+        try:
+            comps.append((cname, load_component(registry, cname, values, file, text, key + ("components", cname),
+                                                root, files, context)))
+        except ConfigError as exc:
+            problems.extend(exc.problems)
+    scripts = []
+    refs = raw.get("scripts", [])
+    for j, item in enumerate(refs if isinstance(refs, list) else []):
+        ref = _valid_or_none(ScriptRef, item)
+        if ref is None:
+            continue  # reported by EntityConfig
+        try:
+            scripts.append((*_load_script(registry, ref, file, text, key + ("scripts", j)), ref.enabled))
+        except ConfigError as exc:
+            problems.extend(exc.problems)
+    name = raw.get("name", "")
+    return EntityPlan(name if isinstance(name, str) else "", comps, scripts), problems
 
 
 def load_component(registry: Registry, cname: str, values: dict, file: Path, text: str, key: tuple,
@@ -229,6 +272,15 @@ class EntityRecord:
     components: dict[str, tuple[Any, list[type]]] = field(default_factory=dict)
 
 
+def build_problem(file: Path | str, key: str, exc: BaseException) -> Problem:
+    """A component factory's failure as a problem: ValueError and OSError carry a message for people (a
+    missing asset, an unstable parameter); anything else is named by its type, with the traceback in the log."""
+    if isinstance(exc, (ValueError, OSError, ConfigError)):
+        return Problem(str(file), key, f"cannot build: {exc}")
+    log.error("building %s of %s raised", key, file, exc_info=exc)
+    return Problem(str(file), key, f"cannot build: {type(exc).__name__}: {exc} (traceback in the log)")
+
+
 def build_component(world: World, registry: Registry, plan: ScenePlan, entity: int, name: str, cname: str,
                     cfg: Any) -> list[Any]:
     ctx = BuildContext(world, entity, name, str(plan.file), plan.configs_root)
@@ -247,8 +299,8 @@ def spawn_entity(world: World, registry: Registry, plan: ScenePlan, index: int, 
     for cname, cfg in ent.components:
         try:
             built = build_component(world, registry, plan, entity, ent.name, cname, cfg)
-        except (ValueError, OSError) as exc:
-            problems.append(Problem(str(plan.file), f"entities[{index}].components.{cname}", str(exc)))
+        except Exception as exc:  # a plugin's factory failing on this config must not take the engine down
+            problems.append(build_problem(plan.file, f"entities[{index}].components.{cname}", exc))
             continue
         for comp in built:
             world.add(entity, comp)

@@ -177,6 +177,14 @@ def make_slot(world: World, entity: Entity, cls: type[Script], params: ConfigMod
     return ScriptSlot(cls.script_name, instance, readers=readers)
 
 
+def entity_label(world: World, entity: Entity) -> str:
+    """``entity 3 ('crate')``: the id, and the scene's name for it when it has one."""
+    from engine.builtin import Name
+
+    name = world.try_get(entity, Name)
+    return f"entity {entity} ('{name.value}')" if name is not None and name.value else f"entity {entity}"
+
+
 def _invoke(world: World, entity: Entity, slot: ScriptSlot, hook: str, *args: Any) -> None:
     try:
         getattr(slot.script, hook)(*args)
@@ -187,9 +195,10 @@ def _invoke(world: World, entity: Entity, slot: ScriptSlot, hook: str, *args: An
         failure = ScriptFailure(entity, slot.name, hook, f"{type(exc).__name__}: {exc}", tb)
         runtime.failures.append(failure)
         world.events.send(failure)
+        where = f"script '{slot.name}' on {entity_label(world, entity)}"
         if runtime.strict:
-            raise ScriptError(f"script '{slot.name}' on entity {entity} raised in {hook}: {exc}") from exc
-        log.error("script '%s' on entity %d raised in %s and was disabled:\n%s", slot.name, entity, hook, tb)
+            raise ScriptError(f"{where} raised in {hook}: {exc}") from exc
+        log.error("%s raised in %s and was disabled:\n%s", where, hook, tb)
 
 
 def run_scripts(world: World, dt: float) -> None:

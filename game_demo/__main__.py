@@ -19,6 +19,13 @@ SCENE = Path(__file__).resolve().parents[1] / "configs" / "scenes" / "demo.toml"
 log = logging.getLogger("game_demo")
 
 
+def _positive(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive number of ticks, got {value}")
+    return value
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m game_demo", description=__doc__.splitlines()[0])
     parser.add_argument("--headless", action="store_true", help="render offscreen with EGL")
@@ -27,7 +34,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--scene", type=Path, default=SCENE)
     parser.add_argument("--max-seconds", type=float, default=240.0, help="give up after this much game time")
     parser.add_argument("--screenshots", type=Path, default=Path("out/demo"), help="headless screenshot folder")
-    parser.add_argument("--screenshot-every", type=int, default=300, help="ticks between headless screenshots")
+    parser.add_argument("--screenshot-every", type=_positive, default=300, help="ticks between headless screenshots")
     parser.add_argument("--no-render", action="store_true", help="autoplay without any rendering (fastest)")
     parser.add_argument("--size", nargs=2, type=int, default=None, metavar=("W", "H"))
     args = parser.parse_args(argv)
@@ -39,11 +46,17 @@ def main(argv: list[str] | None = None) -> int:
     except ConfigError as exc:
         print(exc, file=sys.stderr)
         return 1
-    if not args.headless and not args.no_render and has_display():
-        return play_window(app, args)
-    if not args.autoplay:
-        log.info("no display: running the autoplay headless, screenshots go to %s", args.screenshots)
-    return autoplay(app, args)
+    from engine.render.frontend import ContextError
+
+    try:
+        if not args.headless and not args.no_render and has_display():
+            return play_window(app, args)
+        if not args.autoplay:
+            log.info("no display: running the autoplay headless, screenshots go to %s", args.screenshots)
+        return autoplay(app, args)
+    except ContextError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
 
 
 def autoplay(app: App, args: argparse.Namespace) -> int:

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from engine.config import Color3, ConfigModel, Vec3, Vec4
 from engine.input import InputState
@@ -45,6 +45,17 @@ class CameraConfig(ConfigModel):
                                      description="Render features not drawn in this view (e.g. 'grass_field' "
                                                  "in a minimap).")
     enabled: bool = True
+
+    @model_validator(mode="after")
+    def _consistent(self) -> CameraConfig:
+        if self.near >= self.far:
+            raise ValueError(f"near ({self.near:g}) must be less than far ({self.far:g})")
+        x, y, w, h = self.viewport
+        if not (0.0 <= x < 1.0 and 0.0 <= y < 1.0 and 0.0 < w <= 1.0 and 0.0 < h <= 1.0
+                and x + w <= 1.0 + 1e-6 and y + h <= 1.0 + 1e-6):
+            raise ValueError(f"viewport {list(self.viewport)} must lie inside the window: x, y in [0, 1), "
+                             "width, height in (0, 1], x + width <= 1 and y + height <= 1")
+        return self
 
 
 @dataclass

@@ -49,3 +49,14 @@ def test_camera_matrices_match_viewport_rounding():
     view, proj, rect = camera_matrices(app.world.get(mini, Camera), app.world.get(mini, Transform), (961, 541))
     assert rect == viewport_pixels((0.75, 0.75, 0.25, 0.25), (961, 541)) == (721, 406, 240, 135)
     assert np.isclose(proj[1, 1] / proj[0, 0], 240 / 135)
+
+
+def test_camera_config_rejects_inconsistent_values():
+    import pytest
+
+    from engine.config import ConfigError, validate
+
+    for bad, text in (({"near": 10.0, "far": 5.0}, "less than far"), ({"viewport": [0.8, 0.0, 0.5, 1.0]}, "inside"),
+                      ({"viewport": [0.0, 0.0, 0.0, 1.0]}, "inside")):
+        with pytest.raises(ConfigError, match=text):
+            validate(CameraConfig, bad, "camera.toml")

@@ -76,4 +76,4 @@ def test_angle_range_must_be_ordered():
 
 def test_drag_repeats_cannot_exceed_repeats():
     text = _error({"repeats": 4, "drag_repeats": 8})
-    assert "drag_repeats: Value error, must not exceed repeats (4)" in text
+    assert "drag_repeats: must not exceed repeats (4)" in text

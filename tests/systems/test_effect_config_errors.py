@@ -1,0 +1,135 @@
+"""Out-of-range values in every effect component: a ConfigError with the file, the TOML key path, the value and
+what was expected; and every numeric config field bounded (so no file can size memory or break stability)."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from pydantic import ValidationError
+
+from engine.cli import main
+from engine.config import ConfigError
+from engine.registry import default_registry
+from engine.scene import plan_scene
+
+REGISTRY = default_registry()
+
+# component, TOML lines of its table, key under the component ("" = a whole-table check), value, expectation
+CASES = [
+    ("EnergyWaveEmitter", "max_particles = 0", "max_particles", 0, "greater than or equal to 1"),
+    ("EnergyWaveEmitter", "circular_probability = 1.5", "circular_probability", 1.5, "less than or equal to 1"),
+    ("EnergyWaveEmitter", "splash_samples = 1000", "splash_samples", 1000, "less than or equal to 64"),
+    ("EnergyWaveEmitter", "beam_speed = nan", "beam_speed", math.nan, "finite number"),
+    ("GrassField", "grid_x = 100000", "grid_x", 100000, "less than or equal to 256"),
+    ("GrassField", "grid_x = 256\ngrid_z = 256\nplants_per_cell = 256", "", None, "exceeds 1048576"),
+    ("GrassField", "length_of_interest = 0.000001", "", None, "dots per stem"),
+    ("ToonSmokeVolume", "simulation_resolution = [12, 16, 16]", "simulation_resolution[0]", 12, "multiple of 8"),
+    ("ToonSmokeVolume", "particle_count = 1000000", "particle_count", 1000000, "less than or equal to 100000"),
+    ("ToonSmokeVolume", "display_resolution = [40, 40, 40]", "", None, "integer factor 1..4"),
+    ("WaterSurface", "resolution = [4096, 4]", "resolution[0]", 4096, "less than or equal to 2048"),
+    ("WaterSurface", "damping = 2.0", "damping", 2.0, "less than or equal to 1"),
+    ("WaterSurface", "wave_speed = 100.0", "", None, "stability limit"),
+    ("RigidBody", "mass = 0.0", "mass", 0.0, "greater than 0"),
+    ("RigidBody", "velocity = [1e9, 0.0, 0.0]", "velocity[0]", 1e9, "less than or equal to 1000000"),
+    ("RigidBody", 'shape = "box"\nhalf_extents = [0.0, 1.0, 1.0]', "", None, "half_extents must be in (0, 10000]"),
+    ("DustDevil", "particle_count = 10000000", "particle_count", 10000000, "less than or equal to 200000"),
+    ("DustDevil", "grid_resolution = [2, 32, 32]", "grid_resolution[0]", 2, "greater than or equal to 4"),
+    ("DustDevil", "repeats = 4\ndrag_repeats = 8", "drag_repeats", 8, "must not exceed repeats"),
+    ("Terrain", "size_exponent = 40", "size_exponent", 40, "less than or equal to 11"),
+    ("Terrain", "spacing = 0.0", "spacing", 0.0, "greater than 0"),
+    ("Terrain", "colors = [[inf, 0.0, 0.0], [0.0, 0.0, 0.0]]", "colors[0][0]", math.inf, "finite number"),
+    ("Camera", "fov = 500.0", "fov", 500.0, "less than or equal to 150"),
+    ("Camera", "near = 0.0", "near", 0.0, "greater than 0"),
+    ("Mesh", "emissive = -1.0", "emissive", -1.0, "greater than or equal to 0"),
+    ("Mesh", "color = [100.0, 0.0, 0.0]", "color[0]", 100.0, "less than or equal to 64"),
+    ("Collider", "radius = -1.0", "radius", -1.0, "greater than 0"),
+    ("Collider", "half_extents = [-1.0, 1.0, 1.0]", "half_extents[0]", -1.0, "greater than or equal to 0"),
+    ("Collider", "normal = [0.0, 0.0, 0.0]", "normal", [0.0, 0.0, 0.0], "non-zero direction"),
+]
+
+
+def write_scene(tmp_path, cases):
+    root = tmp_path / "configs"
+    (root / "scenes").mkdir(parents=True, exist_ok=True)
+    text = ""
+    for i, (component, lines, *_rest) in enumerate(cases):
+        text += f'[[entities]]\nname = "e{i}"\n[entities.components.{component}]\n{lines}\n'
+    path = root / "scenes" / "s.toml"
+    path.write_text(text)
+    return path
+
+
+def same(a, b) -> bool:
+    return (isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b)) or a == b
+
+
+@pytest.mark.parametrize("component, lines, key, value, expected", CASES,
+                         ids=[f"{c[0]}-{c[2] or 'table'}-{i}" for i, c in enumerate(CASES)])
+def test_out_of_range_value_names_file_key_value_and_expectation(tmp_path, component, lines, key, value, expected):
+    path = write_scene(tmp_path, [(component, lines)])
+    with pytest.raises(ConfigError) as err:
+        plan_scene(path, REGISTRY)
+    (problem,) = err.value.problems
+    table = f"entities[0].components.{component}"
+    assert problem.file == str(path)
+    assert problem.key == (f"{table}.{key}" if key else table)
+    assert problem.line is not None and problem.line >= 3
+    assert expected in problem.message, problem.message
+    if key:
+        assert same(problem.value, value)
+
+
+def test_validate_reports_every_case_at_once_without_traceback(tmp_path, capsys):
+    path = write_scene(tmp_path, CASES)
+    assert main(["validate", str(path)]) == 1
+    out = capsys.readouterr()
+    assert "Traceback" not in out.err + out.out
+    lines = [line for line in out.err.splitlines() if line.startswith(str(path))]
+    assert len(lines) == len(CASES)
+
+
+def _unbounded(schema: dict, defs: dict, path: str) -> list[str]:
+    """Numeric leaves of a JSON schema without both a lower and an upper bound, and lists without maxItems."""
+    if "$ref" in schema:
+        return _unbounded(defs[schema["$ref"].split("/")[-1]], defs, path)
+    found = []
+    for sub in schema.get("anyOf", []) + schema.get("allOf", []):
+        found += _unbounded(sub, defs, path)
+    kind = schema.get("type")
+    if kind in ("number", "integer"):
+        low = "minimum" in schema or "exclusiveMinimum" in schema
+        high = "maximum" in schema or "exclusiveMaximum" in schema
+        if not (low and high):
+            found.append(path)
+    elif kind == "array":
+        if "maxItems" not in schema:
+            found.append(f"{path} (no maxItems)")
+        found += _unbounded(schema.get("items", {}), defs, f"{path}[]")
+    for name, sub in schema.get("properties", {}).items():
+        found += _unbounded(sub, defs, f"{path}.{name}")
+    return found
+
+
+def test_every_numeric_config_field_is_bounded():
+    models = {name: spec.model for name, spec in REGISTRY.components.items()}
+    models |= {f"script:{name}": cls.Params for name, cls in REGISTRY.scripts.items()}
+    unbounded = []
+    for name, model in sorted(models.items()):
+        schema = model.model_json_schema()
+        unbounded += _unbounded(schema, schema.get("$defs", {}), name)
+    assert unbounded == []
+
+
+def _float_fields(model) -> list[str]:
+    return [f for f, info in model.model_fields.items() if info.annotation in (float, float | None)]
+
+
+@pytest.mark.parametrize("name", sorted(n for n, spec in REGISTRY.components.items() if _float_fields(spec.model)))
+def test_no_float_field_accepts_nan_or_inf(name):
+    """TOML has nan and inf literals; a float field that took one would poison the simulation silently."""
+    model = REGISTRY.components[name].model
+    for field in _float_fields(model):
+        for bad in (math.nan, math.inf):
+            with pytest.raises(ValidationError, match="finite number"):
+                model.model_validate({field: bad})
