@@ -2,76 +2,196 @@
 
 The points are hashed into a table of cells of size ``radius`` (Müller, Ten Minute Physics #11: integer cell
 coordinates hashed with three large primes, counting sort by hash); each query point scans the 27 cells around
-its own. Everything is vectorized: the candidate pairs of all queries are generated at once with
-``np.repeat``/``cumsum`` and summed per query with ``np.bincount`` (a fixed summation order, so results are
-bit-reproducible).
+its own. Crowded buckets are sampled with weights (see :meth:`SpatialHash.buckets`) so the cost per query is
+bounded. Several independent groups (one per emitter: its points repel only its own queries) are computed at
+once, their tables laid end to end, with exactly the result each group would get alone. Everything is vectorized
+over the (query, bucket) pairs: the samples are laid out (sample, pair) in blocks of a few thousand, computed in
+reused work arrays (no per-step allocation) and summed in a fixed order, so results are bit-reproducible.
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
 F64 = NDArray[np.float64]
+I64 = NDArray[np.int64]
 
 _PRIMES = np.array([73856093, 19349663, 83492791], dtype=np.int64)
-_OFFSETS = np.stack(np.meshgrid([-1, 0, 1], [-1, 0, 1], [-1, 0, 1], indexing="ij"), axis=-1).reshape(27, 3)
-_SAME_POINT = 1e-18
-_GOLDEN = 0.6180339887498949  # low-discrepancy phases of the sampled buckets  # squared distance under which a neighbour counts as "at the same position"
+_STEPS = np.array([-1, 0, 1], dtype=np.int64)  # cell offsets along each axis: 3 x 3 x 3 neighbouring cells
+_SAME_POINT = 1e-18  # squared distance under which a neighbour counts as "at the same position"
+_GOLDEN = 0.6180339887498949  # low-discrepancy phases of the sampled buckets
+_BLOCK_PAIRS = 16384  # (sample, pair) slots per block: 128 KiB per float64 work array
 
 
-def _hash(cells: NDArray[np.int64], table: int) -> NDArray[np.int64]:
+def _hash(cells: I64, table: int) -> I64:
     """Cell (ix, iy, iz) -> bucket in [0, table): (ix·p1 xor iy·p2 xor iz·p3) mod table (table a power of 2)."""
     h = (cells[..., 0] * _PRIMES[0]) ^ (cells[..., 1] * _PRIMES[1]) ^ (cells[..., 2] * _PRIMES[2])
     return h & (table - 1)
 
 
+def _hash_around(cells: I64, table: int) -> I64:
+    """Buckets (q, 27) of the 3 x 3 x 3 cells around each cell (q, 3): the hash of :func:`_hash`, each axis's
+    three products computed once."""
+    hx, hy, hz = ((cells[:, axis, None] + _STEPS) * _PRIMES[axis] for axis in range(3))
+    h = hx[:, :, None, None] ^ hy[:, None, :, None] ^ hz[:, None, None, :]
+    return h.reshape(len(cells), 27) & (table - 1)
+
+
+def _table_size(points: int) -> int:
+    """Hash-table size of ``points`` points: the power of 2 >= 2·points (at least 16)."""
+    return 1 << max(4, int(2 * max(points, 1) - 1).bit_length())
+
+
+def in_reach(points: F64, query: F64, radius: float, mask: NDArray[np.bool_] | None = None) -> I64:
+    """Indices of the ``points`` (where ``mask``) inside the queries' bounding box grown by ``radius``."""
+    lo = query.min(axis=0) - radius
+    hi = query.max(axis=0) + radius
+    inside = np.ones(len(points), dtype=bool) if mask is None else np.array(mask, dtype=bool)
+    for axis in range(3):  # loop over the three axes, vectorized over points
+        column = points[:, axis]
+        inside &= column >= lo[axis]
+        inside &= column <= hi[axis]
+    return np.flatnonzero(inside)
+
+
+class _Workspace:
+    """Work arrays reused by every call: allocating arrays this large anew each step cost a page fault per 4 KiB
+    on small VMs (the allocator hands freed memory back). Never state: each call writes them before reading them,
+    and what a call returns is copied out of them (so :func:`grouped_repulsion` is not re-entrant)."""
+
+    def __init__(self) -> None:
+        self.size = 0
+        self.tables: dict[str, NDArray] = {}
+
+    def table(self, name: str, size: int, dtype: type = np.float64) -> NDArray:
+        """A reused 1-d array ``name`` of ``size`` elements."""
+        array = self.tables.get(name)
+        if array is None or len(array) < size:
+            array = self.tables[name] = np.empty(max(size, 4096), dtype=dtype)
+        return array[:size]
+
+    def arrays(self, samples: int, pairs: int) -> tuple:
+        """Views (index, offset, deltas (3, ...), d2, square, ok, mask), each (samples, pairs)."""
+        shape, size = (samples, pairs), samples * pairs
+        if size > self.size:
+            self.size = max(size, _BLOCK_PAIRS)
+            self.index = np.empty(self.size, dtype=np.int64)
+            self.floats = np.empty((6, self.size))
+            self.flags = np.empty((2, self.size), dtype=bool)
+        floats = self.floats[:, :size]
+        return (self.index[:size].reshape(shape), floats[0].reshape(shape), floats[1:4].reshape((3, *shape)),
+                floats[4].reshape(shape), floats[5].reshape(shape), self.flags[0, :size].reshape(shape),
+                self.flags[1, :size].reshape(shape))
+
+
+_WORK = _Workspace()
+
+
 class SpatialHash:
-    """Points sorted by hashed grid cell: ``order`` lists point indices bucket by bucket."""
+    """The points of several groups hashed into per-group tables laid end to end (group g's bucket b is global
+    bucket ``offset[g] + b``): bucket B holds sorted slots ``starts[B] .. starts[B] + counts[B]``, ``xyz`` (3, n)
+    the point coordinates in that order. A group's table and order are those it would have alone. The arrays are
+    work arrays: valid until the next SpatialHash is built."""
 
-    def __init__(self, points: F64, cell: float) -> None:
-        self.points = points
-        self.cell = float(cell)
-        self.table = 1 << max(4, int(2 * max(len(points), 1) - 1).bit_length())  # power of 2 >= 2·n
-        keys = _hash(np.floor(points / self.cell).astype(np.int64), self.table)
-        if self.table <= 1 << 16:
-            keys = keys.astype(np.uint16)  # numpy sorts 16-bit keys with a radix (counting) sort
-        self.order = np.argsort(keys, kind="stable")
-        self.counts = np.bincount(keys, minlength=self.table)
-        self.starts = np.cumsum(self.counts) - self.counts
+    def __init__(self, points: list[F64], cells: F64) -> None:
+        sizes = [len(p) for p in points]
+        self.cells = np.asarray(cells, dtype=np.float64)
+        self.tables = np.array([_table_size(n) for n in sizes], dtype=np.int64)
+        self.offsets = np.cumsum(self.tables) - self.tables
+        self.counts = _WORK.table("counts", int(self.tables.sum()), np.int64)
+        self.xyz = _WORK.table("xyz", 3 * sum(sizes)).reshape(3, -1)
+        base = 0
+        for g, group in enumerate(points):  # loop over groups (emitters): each sorted on its own, in cache
+            keys = _hash(np.floor(group / self.cells[g]).astype(np.int64), int(self.tables[g]))
+            if self.tables[g] <= 1 << 16:
+                keys = keys.astype(np.uint16)  # numpy sorts 16-bit keys with a radix (counting) sort
+            order = np.argsort(keys, kind="stable")
+            table = slice(int(self.offsets[g]), int(self.offsets[g] + self.tables[g]))
+            self.counts[table] = np.bincount(keys, minlength=int(self.tables[g]))
+            self.xyz[:, base: base + len(group)] = group[order].T
+            base += len(group)
+        self.starts = np.cumsum(self.counts, out=_WORK.table("starts", len(self.counts), np.int64))
+        self.starts -= self.counts
 
-    def candidates(self, query: F64, per_bucket_limit: int = 0
-                   ) -> tuple[NDArray[np.int64], NDArray[np.int64], F64 | None]:
-        """Candidate pairs (query index, point index, weight or None) from the 27 cells around each query point.
+    def buckets(self, queries: list[F64], per_bucket_limit: int = 0) -> _Buckets:
+        """The non-empty buckets among the 27 cells around each query (``queries[g]`` of group g, numbered one
+        after the other), as flat (query, bucket) pairs, query-major and by bucket within a query.
 
-        Buckets reached twice by one query (hash collisions) are scanned once. When ``per_bucket_limit`` > 0, a
-        bucket holding more points is sampled with an even stride from a phase that differs per (query, bucket) (a
-        golden-ratio sequence, so neighbouring queries do not all see the same subset), each sample weighted
-        count/limit: the sum over a crowded bucket stays an unbiased estimate at bounded cost. Weights are None when
-        nothing was sampled.
+        A group's crowded buckets are sampled when ``per_bucket_limit`` > 0 and one of its queries reaches a
+        bucket of more points: ``per_bucket_limit`` samples at an even stride count/limit from a phase (a
+        golden-ratio sequence over the group's (query, bucket) pairs, so neighbouring queries do not all see the
+        same subset), each weighted by the stride, so the sum over the bucket stays an unbiased estimate at
+        bounded cost. Otherwise every point is taken with weight 1. A bucket reached twice by one query (a hash
+        collision) is scanned once.
         """
-        q = len(query)
-        qcells = np.floor(query / self.cell).astype(np.int64)
-        keys = _hash(qcells[:, None, :] + _OFFSETS[None, :, :], self.table)  # (q, 27)
-        keys.sort(axis=1)
-        counts = self.counts[keys]
-        counts[:, 1:][keys[:, 1:] == keys[:, :-1]] = 0
-        counts, keys = counts.ravel(), keys.ravel()
-        sampled = per_bucket_limit > 0 and int(counts.max(initial=0)) > per_bucket_limit
-        taken = np.minimum(counts, per_bucket_limit) if sampled else counts
-        nonempty = np.flatnonzero(taken)
-        taken, counts, keys = taken[nonempty], counts[nonempty], keys[nonempty]
-        total = int(taken.sum())
-        slot = np.repeat(np.arange(len(nonempty)), taken)
-        within = np.arange(total) - np.repeat(np.cumsum(taken) - taken, taken)
-        weight = None
-        if sampled:
-            stride = (counts / taken)[slot]  # 1 unless the bucket was sampled
-            phase = (np.arange(len(nonempty)) * _GOLDEN % 1.0)[slot]  # a different subset for every (query, cell)
-            within = ((within + phase) * stride).astype(np.int64)
-            weight = stride
-        point = self.order[np.repeat(self.starts[keys], taken) + within]
-        return np.repeat(nonempty // 27, taken), point, weight
+        parts, first = [], 0
+        for g, query in enumerate(queries):  # loop over groups (emitters): small arrays, each in cache
+            keys = _hash_around(np.floor(query / self.cells[g]).astype(np.int64), int(self.tables[g]))
+            keys.sort(axis=1)
+            keys += self.offsets[g]
+            counts = self.counts[keys]
+            counts[:, 1:][keys[:, 1:] == keys[:, :-1]] = 0
+            counts, keys = counts.ravel(), keys.ravel()
+            sampled = per_bucket_limit > 0 and int(counts.max(initial=0)) > per_bucket_limit
+            taken = np.minimum(counts, per_bucket_limit) if sampled else counts
+            nonempty = np.flatnonzero(taken)
+            taken = taken[nonempty]
+            phase = np.zeros(len(nonempty))  # every point taken: slot k is sample k
+            if sampled:  # serial number of the pair times the golden ratio, mod 1 (x - floor(x))
+                phase = np.arange(len(nonempty)) * _GOLDEN
+                phase -= np.floor(phase)
+            parts.append((nonempty // 27 + first, self.starts[keys[nonempty]], taken, counts[nonempty] / taken,
+                          phase))
+            first += len(query)
+        size = sum(len(part[0]) for part in parts)
+        return _Buckets(*(np.concatenate([part[i] for part in parts], out=_WORK.table(name, size, dtype))
+                          for i, (name, dtype) in enumerate(_Buckets.dtypes.items())))
+
+
+class _Buckets(NamedTuple):
+    owner: I64  # query of each (query, bucket) pair
+    start: I64  # the bucket's first sorted slot
+    taken: I64  # samples taken from it
+    stride: F64  # slot step between samples, also their weight (1: every point)
+    phase: F64  # sample k sits at slot floor((k + phase)·stride)
+
+    dtypes = {"owner": np.int64, "start": np.int64, "taken": np.int64, "stride": np.float64, "phase": np.float64}
+
+
+def _pair_sums(xyz: F64, point: F64, start: I64, taken: I64, stride: F64, phase: F64, reach: F64) -> F64:
+    """Σ stride·(P − Q)/|P − Q|² over the samples Q within ``reach`` (squared radius) of one block of (query P,
+    bucket) pairs, ``point`` (3, pairs) holding each pair's P: returns (3, pairs).
+
+    The block is laid out (sample, pair), so every operation runs along the long pair axis. Sample k sits at
+    floor((k + phase)·stride) from the bucket's start; samples past ``taken`` are padding (their slots may point
+    past the end of the table: gathered with clipping, weight 0).
+    """
+    samples = int(taken.max())
+    k = np.arange(samples)[:, None]
+    index, offset, deltas, d2, square, ok, mask = _WORK.arrays(samples, len(start))
+    np.add(k, phase, out=offset)
+    np.multiply(offset, stride, out=offset)
+    np.copyto(index, offset, casting="unsafe")  # floor: the offsets are >= 0
+    np.add(index, start, out=index)
+    for axis in range(3):  # loop over the three axes
+        np.take(xyz[axis], index, out=deltas[axis], mode="clip")
+        np.subtract(point[axis], deltas[axis], out=deltas[axis])
+    dx, dy, dz = deltas
+    np.multiply(dx, dx, out=d2)
+    np.add(d2, np.multiply(dy, dy, out=square), out=d2)
+    np.add(d2, np.multiply(dz, dz, out=square), out=d2)
+    np.less_equal(d2, reach, out=ok)
+    np.logical_and(ok, np.greater(d2, _SAME_POINT, out=mask), out=ok)
+    if int(taken.min()) < samples:
+        np.logical_and(ok, np.less(k, taken, out=mask), out=ok)  # padding
+    np.maximum(d2, _SAME_POINT, out=d2)
+    w = np.divide(stride, d2, out=d2)
+    np.multiply(w, ok, out=w)
+    np.multiply(deltas, w, out=deltas)
+    return deltas.sum(axis=1)
 
 
 def neighbour_repulsion(query: F64, points: F64, radius: float, strength: float,
@@ -81,29 +201,47 @@ def neighbour_repulsion(query: F64, points: F64, radius: float, strength: float,
     Sign: the thesis prints (Q_i − P), which points towards the neighbours; a repulsion pushes away from them, so
     this returns r Σ (P − Q_i)/|P − Q_i|² (see docs/effects/energy_wave.md). A neighbour at the same position as P
     (including P itself when it is among ``points``) contributes nothing, as the thesis says. Only the points
-    where ``point_mask`` is true (all when None) are neighbours.
+    where ``point_mask`` is true (all when None) are neighbours; ``per_bucket_limit`` > 0 samples crowded cells
+    (see :meth:`SpatialHash.buckets`).
     """
     query = np.asarray(query, dtype=np.float64)
-    out = np.zeros_like(query)
-    if len(query) == 0 or len(points) == 0 or strength == 0.0:
+    if len(query) == 0 or len(points) == 0:
+        return np.zeros_like(query)
+    near = in_reach(points, query, radius, point_mask)  # points that can be within reach
+    return grouped_repulsion([(query, points[near], radius, strength)], per_bucket_limit)[0]
+
+
+def grouped_repulsion(groups: list[tuple[F64, F64, float, float]], per_bucket_limit: int = 0) -> list[F64]:
+    """:func:`neighbour_repulsion` of independent groups (query, points, radius, strength) at once, each group's
+    ``points`` already restricted to :func:`in_reach` of its queries (the hash table is sized by them): the
+    same results as one group at a time."""
+    out = [np.zeros((len(q), 3)) for q, _, _, _ in groups]
+    live = [g for g, (q, p, _, strength) in enumerate(groups) if len(q) and len(p) and strength != 0.0]
+    if not live:
         return out
-    lo = query.min(axis=0) - radius
-    hi = query.max(axis=0) + radius
-    px, py, pz = (np.ascontiguousarray(points[:, a]) for a in range(3))
-    reach = (px >= lo[0]) & (px <= hi[0]) & (py >= lo[1]) & (py <= hi[1]) & (pz >= lo[2]) & (pz <= hi[2])
-    near = np.flatnonzero(reach if point_mask is None else reach & point_mask)  # points that can be within reach
-    if len(near) == 0:
+    grid = SpatialHash([groups[g][1] for g in live], [groups[g][2] for g in live])
+    query = np.concatenate([groups[g][0] for g in live])
+    group = np.repeat(np.arange(len(live)), [len(groups[g][0]) for g in live])
+    owner, start, taken, stride, phase = grid.buckets([groups[g][0] for g in live], per_bucket_limit)
+    if len(owner) == 0:
         return out
-    grid = SpatialHash(points[near], radius)
-    qi, pi, weight = grid.candidates(query, per_bucket_limit)
-    pi = near[pi]
-    qx, qy, qz = (np.ascontiguousarray(query[:, a]) for a in range(3))
-    dx = qx[qi] - px[pi]
-    dy = qy[qi] - py[pi]
-    dz = qz[qi] - pz[pi]
-    d2 = dx * dx + dy * dy + dz * dz
-    ok = (d2 <= radius * radius) & (d2 > _SAME_POINT)
-    w = np.divide(1.0 if weight is None else weight, d2, out=np.zeros_like(d2), where=ok)
-    for axis, d in enumerate((dx, dy, dz)):
-        out[:, axis] = np.bincount(qi, weights=d * w, minlength=len(query))
-    return strength * out
+    reach = np.array([groups[g][2] * groups[g][2] for g in live])  # squared radius per group
+    # Blocks of buckets with equal sample counts: fullest first (a stable radix sort when counts fit 16 bits).
+    most = int(taken.max())
+    order = np.argsort((most - taken).astype(np.uint16) if most < 1 << 16 else -taken, kind="stable")
+    columns = np.ascontiguousarray(query.T)
+    sums = _WORK.table("sums", 3 * len(owner)).reshape(3, -1)
+    lo = 0
+    while lo < len(order):  # loop over blocks of pairs (bounded work arrays), not over particles
+        pick = order[lo: lo + max(1, _BLOCK_PAIRS // int(taken[order[lo]]))]
+        who = owner[pick]
+        sums[:, pick] = _pair_sums(grid.xyz, columns[:, who], start[pick], taken[pick], stride[pick], phase[pick],
+                                   reach[group[who]])
+        lo += len(pick)
+    total = np.empty((len(query), 3))
+    for axis in range(3):  # per query, its buckets summed in order
+        total[:, axis] = np.bincount(owner, weights=sums[axis], minlength=len(query))
+    bounds = np.cumsum([0] + [len(groups[g][0]) for g in live])
+    for i, g in enumerate(live):  # loop over groups
+        out[g] = total[bounds[i]: bounds[i + 1]] * groups[g][3]
+    return out

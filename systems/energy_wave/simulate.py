@@ -13,6 +13,11 @@ One fixed step of one emitter:
 4. dead particles (age > lifetime) are removed by swapping the tail into their slots (O(dead));
 5. one ``Impact`` and one ``EnergyWaveHit`` event per (emitter, collider) hit this step.
 
+The emitters of a world step together, phase by phase: one ray cast and one depth query per collider for all
+beams, one neighbour search for all emitters' hits (each emitter's particles repel only its own), and per emitter,
+in entity order, its random draws and events. Each emitter only touches its own state and random stream, so the
+result is the one of stepping them one after the other (tested).
+
 Sign conventions (the printed eqs. 3.2 and 3.3 point the damper and the "repulsion" inwards):
 D = k z n − h (w·n) n (the damper opposes the normal velocity, so a particle entering the surface is pushed out);
 R = r Σ (P − Q_i)/|P − Q_i|² (away from the neighbours), with the part of R that points into the surface removed
@@ -36,7 +41,7 @@ from engine.noise import PerlinNoise
 from engine.spatial import Transform, quat_rotate, quat_to_matrix
 from engine.world import World
 
-from .neighbours import neighbour_repulsion
+from .neighbours import grouped_repulsion, in_reach
 
 F64 = NDArray[np.float64]
 
@@ -72,15 +77,19 @@ def collider_bounds(collider: Collider, transform: Transform) -> tuple[F64 | Non
     return None, None
 
 
-def gather_colliders(world: World, emitter: int, layers: list[str]) -> list[ColliderEntry]:
-    """Every entity with Transform + Collider except the emitter itself, ascending by entity id."""
+def gather_colliders(world: World) -> list[ColliderEntry]:
+    """Every entity with Transform + Collider, ascending by entity id (see :func:`hittable` for one emitter's)."""
     out = []
     for entity, (transform, collider) in world.query(Transform, Collider):
-        if entity == emitter or (layers and collider.layer not in layers):
-            continue
         lo, hi = collider_bounds(collider, transform)
         out.append(ColliderEntry(entity, collider, transform, lo, hi))
     return out
+
+
+def hittable(colliders: list[ColliderEntry], emitter: int, layers: list[str]) -> NDArray[np.bool_]:
+    """Which ``colliders`` the beam of ``emitter`` can hit: all but the emitter itself, only ``layers`` if given."""
+    return np.array([entry.entity != emitter and (not layers or entry.collider.layer in layers)
+                     for entry in colliders], dtype=bool)
 
 
 @dataclass
@@ -93,23 +102,29 @@ class SweepResult:
     triggers: list[tuple[int, NDArray[np.int64], F64]]  # (collider index, segment rows, entry points)
 
 
-def sweep(p0: F64, p1: F64, colliders: list[ColliderEntry]) -> SweepResult:
-    """Ray-cast the segments p0 → p1 against every collider; keep the first solid hit per segment."""
+def sweep(p0: F64, p1: F64, colliders: list[ColliderEntry],
+          allowed: NDArray[np.bool_] | None = None) -> SweepResult:
+    """Ray-cast the segments p0 → p1 against every collider; keep the first solid hit per segment.
+
+    ``allowed`` (segments, colliders) says which segment may hit which collider (None: every one), so the
+    segments of several emitters are cast together: one ray cast per collider.
+    """
     n = len(p0)
     best_t = np.full(n, np.inf)
     best_c = np.full(n, -1, dtype=np.int64)
     best_n = np.zeros((n, 3))
-    seg = p1 - p0
-    seg_lo, seg_hi = np.minimum(p0, p1), np.maximum(p0, p1)
     trigger_hits = []
     for index, entry in enumerate(colliders):  # loop over colliders, vectorized over particles
-        if entry.lo is None:
-            rows = np.arange(n)
-        else:
-            rows = np.flatnonzero(np.all((seg_hi >= entry.lo) & (seg_lo <= entry.hi), axis=1))
+        candidate = np.ones(n, dtype=bool) if allowed is None else allowed[:, index].copy()
+        if entry.lo is not None:  # the segment's bounding box overlaps the collider's, axis by axis
+            for axis in range(3):  # loop over the three axes
+                a, b = p0[:, axis], p1[:, axis]
+                candidate &= (a >= entry.lo[axis]) | (b >= entry.lo[axis])
+                candidate &= (a <= entry.hi[axis]) | (b <= entry.hi[axis])
+        rows = np.flatnonzero(candidate)
         if rows.size == 0:
             continue
-        hit, t, normal = entry.collider.ray_cast(p0[rows], seg[rows], entry.transform, max_t=1.0)
+        hit, t, normal = entry.collider.ray_cast(p0[rows], p1[rows] - p0[rows], entry.transform, max_t=1.0)
         if entry.collider.is_trigger:
             enter = hit & (t > 0.0)
             trigger_hits.append((index, rows[enter], t[enter]))
@@ -122,7 +137,7 @@ def sweep(p0: F64, p1: F64, colliders: list[ColliderEntry]) -> SweepResult:
         keep = t <= best_t[rows]
         rows, t = rows[keep], t[keep]
         if rows.size:
-            triggers.append((index, rows, p0[rows] + t[:, None] * seg[rows]))
+            triggers.append((index, rows, p0[rows] + t[:, None] * (p1[rows] - p0[rows])))
     return SweepResult(best_t, best_c, best_n, triggers)
 
 
@@ -226,6 +241,41 @@ def _noise(state: EnergyWaveState) -> PerlinNoise:
 
 
 # ------------------------------------------------------------------------------------------------------ the step
+@dataclass
+class _Emitter:
+    """One emitter during a step: its components and random stream, and the segments its beam flies."""
+
+    entity: int
+    transform: Transform
+    cfg: EnergyWaveEmitter
+    state: EnergyWaveState
+    rng: np.random.Generator
+    beam: NDArray[np.int64] | None = None  # slots of the particles flying as beam at the start of the step
+    start: F64 | None = None  # their positions before the move
+
+
+class _Scratch:
+    """Work arrays reused from step to step for temporaries as large as a particle buffer.
+
+    Allocating and freeing such arrays every step costs a page fault per 4 KiB on small VMs (the allocator hands
+    the memory back each time; on the 2-core VM such faults took a third of the step). Never state: every use
+    writes the array before reading it.
+    """
+
+    def __init__(self) -> None:
+        self._arrays: dict[str, np.ndarray] = {}
+
+    def get(self, name: str, shape: tuple[int, ...]) -> F64:
+        size = int(np.prod(shape))
+        array = self._arrays.get(name)
+        if array is None or array.size < size:
+            array = self._arrays[name] = np.empty(max(size, 1024))
+        return array[:size].reshape(shape)
+
+
+_SCRATCH = _Scratch()
+
+
 def _remove_dead(buf: ParticleBuffer, dead: NDArray[np.bool_]) -> int:
     """Remove particles flagged ``dead`` (over the live range) by moving live tail particles into their slots."""
     n = buf.count
@@ -292,12 +342,31 @@ def _ball(rng: np.random.Generator, count: int) -> F64:
     return g * np.cbrt(rng.random(count))[:, None]
 
 
-def _hit(cfg: EnergyWaveEmitter, state: EnergyWaveState, rng: np.random.Generator, rows: NDArray[np.int64],
-         point: F64, normal: F64, depth: F64) -> None:
-    """Turn the beam particles ``rows`` into splash particles at their hit points (sections 3.2–3.3)."""
+@dataclass
+class _Splash:
+    """Beam particles that hit this step, between their random draws and their landing in the buffer."""
+
+    rows: NDArray[np.int64]  # buffer slots
+    point: F64  # hit points H
+    normal: F64  # surface normals n there
+    pattern: NDArray[np.int8]
+    lifetime: F64
+    magnitude: F64  # c (m/s²)
+    control: NDArray[np.int8]
+    offset: F64  # random offsets of the control points
+    circular: NDArray[np.int64]  # which of them move circularly (eqs. 3.2–3.4)
+    drag: F64  # D (eq. 3.2) of the circular ones
+    neighbours: F64  # positions that repel the circular ones (eq. 3.3)
+
+
+def _splash(cfg: EnergyWaveEmitter, state: EnergyWaveState, rng: np.random.Generator, rows: NDArray[np.int64],
+            point: F64, normal: F64, depth: F64) -> _Splash:
+    """Draw the pattern, lifetime, c and control point of the beam particles ``rows`` that hit (sections 3.2–3.3)
+    and the drag D of the circular ones (eq. 3.2), and gather their neighbours; :func:`_repulsions` then gives
+    their repulsion R (eq. 3.3) and :func:`_land` their acceleration (eq. 3.4)."""
     buf = state.particles
     n = len(rows)
-    w = buf.velocity[rows].copy()
+    w = buf.velocity[rows]
     u = rng.random((n, 5))
     pattern = assign_patterns(u[:, 0], u[:, 1], cfg.circular_probability, cfg.continuity_probability,
                               cfg.splash_samples, cfg.splash_roundness)
@@ -315,28 +384,46 @@ def _hit(cfg: EnergyWaveEmitter, state: EnergyWaveState, rng: np.random.Generato
         control = np.minimum(np.searchsorted(cumulative, u[:, 4], side="right"), len(weights) - 1).astype(np.int8)
         radii = np.array([cp.spread for cp in cfg.control_points])
         offset = _ball(rng, n) * radii[control][:, None]
-    # Circular: A from the drag D (eq. 3.2) and the neighbours' repulsion R (eq. 3.3), eq. 3.4.
-    acceleration = np.zeros((n, 3))
+    # Circular: the drag D (eq. 3.2) now; neighbours for R (eq. 3.3): every particle already hit (``rows`` are
+    # still BEAM in the buffer) and this step's hits, only those near the queries (the impact zone is small).
     circ = np.flatnonzero(pattern % 2 == 0)
+    unit = cfg.equation_unit  # D and R in the paper's units: lengths in `unit`, velocities per frame
+    drag = penalty_drag(depth[circ] / unit, normal[circ], w[circ] * (FRAME / unit), cfg.spring, cfg.damper)
+    neighbours = np.zeros((0, 3))
     if circ.size:
-        unit = cfg.equation_unit  # D and R in the paper's units: lengths in `unit`, velocities per frame
-        drag = penalty_drag(depth[circ] / unit, normal[circ], w[circ] * (FRAME / unit), cfg.spring, cfg.damper)
-        # Neighbours: every particle already hit (``rows`` are still BEAM in the buffer) and this step's hits.
-        neighbours = np.concatenate([buf.position[: buf.count], point])
-        settled = np.concatenate([buf.pattern[: buf.count] >= 0, np.ones(n, dtype=bool)])
-        repulsion = neighbour_repulsion(point[circ], neighbours, cfg.repulsion_radius, cfg.repulsion * unit,
-                                        NEIGHBOUR_SAMPLE_LIMIT, settled)
-        acceleration[circ] = collision_acceleration(drag, repulsion, normal[circ], c[circ])
-    buf.position[rows] = point
-    buf.hit_point[rows] = point
+        query = point[circ]
+        settled = in_reach(buf.position[: buf.count], query, cfg.repulsion_radius, buf.pattern[: buf.count] >= 0)
+        neighbours = np.concatenate([buf.position[settled], point[in_reach(point, query, cfg.repulsion_radius)]])
+    return _Splash(rows, point, normal, pattern, lifetime, c, control, offset, circ, drag, neighbours)
+
+
+def _repulsions(emitters: list[_Emitter], splashes: list[_Splash | None]) -> list[F64 | None]:
+    """R (eq. 3.3) of every splash's circular particles from its own emitter's neighbours, all emitters at once."""
+    groups = [(s.point[s.circular], s.neighbours, e.cfg.repulsion_radius, e.cfg.repulsion * e.cfg.equation_unit)
+              for e, s in zip(emitters, splashes) if s is not None and s.circular.size]
+    found = iter(grouped_repulsion(groups, NEIGHBOUR_SAMPLE_LIMIT))
+    return [next(found) if s is not None and s.circular.size else None for s in splashes]
+
+
+def _land(state: EnergyWaveState, splash: _Splash, repulsion: F64 | None) -> None:
+    """Turn the beam particles of ``splash`` into splash particles at their hit points: circular ones leave with
+    A = c (D + R)/|D + R| (eq. 3.4) acting for one frame, irregular ones start at rest (eq. 3.5 steers them)."""
+    buf = state.particles
+    rows, circ = splash.rows, splash.circular
+    acceleration = np.zeros((len(rows), 3))
+    if circ.size:
+        acceleration[circ] = collision_acceleration(splash.drag, repulsion, splash.normal[circ],
+                                                    splash.magnitude[circ])
+    buf.position[rows] = splash.point
+    buf.hit_point[rows] = splash.point
     buf.velocity[rows] = acceleration * FRAME  # A acts during the collision frame; irregular ones start at rest
     buf.acceleration[rows] = acceleration
-    buf.target_offset[rows] = offset
+    buf.target_offset[rows] = splash.offset
     buf.age[rows] = 0.0
-    buf.lifetime[rows] = lifetime
-    buf.pattern[rows] = pattern
-    buf.control[rows] = control
-    state.hits_per_pattern += np.bincount(pattern, minlength=len(PATTERNS))
+    buf.lifetime[rows] = splash.lifetime
+    buf.pattern[rows] = splash.pattern
+    buf.control[rows] = splash.control
+    state.hits_per_pattern += np.bincount(splash.pattern, minlength=len(PATTERNS))
 
 
 def _send_events(world: World, emitter: int, colliders: list[ColliderEntry], which: NDArray[np.int64],
@@ -372,58 +459,101 @@ def _steer_irregular(cfg: EnergyWaveEmitter, state: EnergyWaveState, transform: 
     buf.velocity[irregular] = (target - buf.position[irregular]) / remaining[:, None]
 
 
-def _collide_beam(world: World, entity: int, cfg: EnergyWaveEmitter, state: EnergyWaveState,
-                  rng: np.random.Generator, beam: NDArray[np.int64], start: F64) -> None:
-    """Beam particles ``beam`` moved from ``start`` this step: stop the ones that hit, report hits and triggers."""
-    colliders = gather_colliders(world, entity, cfg.collision_layers)
-    if not colliders:
-        return
-    buf = state.particles
-    end = buf.position[beam]
-    incoming = buf.velocity[beam].copy()
-    result = sweep(start, end, colliders)
-    for index, rows, points in result.triggers:
-        _send_events(world, entity, colliders, np.full(len(rows), index), points,
-                     -incoming[rows] / max(cfg.beam_speed, _EPS), incoming[rows], cfg.particle_mass, trigger=True)
-    hit = np.flatnonzero(result.collider >= 0)
-    if hit.size == 0:
-        return
-    point = start[hit] + result.t[hit, None] * (end[hit] - start[hit])
-    normal = result.normal[hit]
-    which = result.collider[hit]
-    depth = np.zeros(hit.size)
-    for index in np.unique(which):  # penetration z of the segment end, per collider hit
+def _advance(e: _Emitter, dt: float) -> None:
+    """Age every particle, steer the irregular ones (eq. 3.5) and move everything; remember the beam segments."""
+    buf = e.state.particles
+    if buf.capacity != e.cfg.max_particles:
+        buf.grow(e.cfg.max_particles)
+    e.state.time += dt
+    n = buf.count
+    buf.age[:n] += dt
+    _steer_irregular(e.cfg, e.state, e.transform, dt)
+    e.beam = np.flatnonzero(buf.pattern[:n] == BEAM)
+    e.start = buf.position[e.beam]  # a copy (fancy indexing)
+    buf.position[:n] += np.multiply(buf.velocity[:n], dt, out=_SCRATCH.get("move", (n, 3)))
+
+
+def _penetration(end: F64, rows: NDArray[np.int64], which: NDArray[np.int64],
+                 colliders: list[ColliderEntry]) -> F64:
+    """Penetration depth z (eq. 3.2) of the segment ends ``end[rows]`` in the colliders ``which`` they hit."""
+    depth = np.zeros(rows.size)
+    for index in np.unique(which):  # loop over the colliders hit, vectorized over particles
         sel = which == index
         entry = colliders[int(index)]
-        depth[sel] = entry.collider.query(end[hit[sel]], entry.transform)[0]
-    _hit(cfg, state, rng, beam[hit], point, normal, depth)
-    _send_events(world, entity, colliders, which, point, normal, incoming[hit], cfg.particle_mass)
+        depth[sel] = entry.collider.query(end[rows[sel]], entry.transform)[0]
+    return depth
+
+
+def _collide(world: World, emitters: list[_Emitter]) -> None:
+    """Stop the beam particles that hit a collider this step, report the hits and triggers (eqs. 3.1–3.6).
+
+    The beams of all emitters are swept together (one ray cast and one depth query per collider), then each
+    emitter in turn reports its triggers, draws its splashes, gets their repulsion and reports its hits.
+    """
+    flying = [e for e in emitters if e.beam.size]
+    colliders = gather_colliders(world)
+    if not flying or not colliders:
+        return
+    bounds = np.cumsum([0] + [e.beam.size for e in flying])
+    start = np.concatenate([e.start for e in flying])
+    end = np.concatenate([e.state.particles.position[e.beam] for e in flying])
+    owner = np.repeat(np.arange(len(flying)), np.diff(bounds))
+    allowed = np.array([hittable(colliders, e.entity, e.cfg.collision_layers) for e in flying])[owner]
+    result = sweep(start, end, colliders, allowed)
+    hit = np.flatnonzero(result.collider >= 0)
+    depth = _penetration(end, hit, result.collider[hit], colliders)
+    splashes, hits = [], []
+    for i, e in enumerate(flying):  # loop over emitters: random draws in each emitter's own stream
+        mine = (hit >= bounds[i]) & (hit < bounds[i + 1])
+        rows = hit[mine]
+        hits.append(rows)
+        if rows.size == 0:
+            splashes.append(None)
+            continue
+        point = start[rows] + result.t[rows, None] * (end[rows] - start[rows])
+        splashes.append(_splash(e.cfg, e.state, e.rng, e.beam[rows - bounds[i]], point, result.normal[rows],
+                                depth[mine]))
+    repulsions = _repulsions(flying, splashes)
+    for i, e in enumerate(flying):  # loop over emitters, in entity order: events in a fixed order
+        incoming = e.state.particles.velocity[e.beam]
+        for index, rows, points in result.triggers:
+            mine = (rows >= bounds[i]) & (rows < bounds[i + 1])
+            local = rows[mine] - bounds[i]
+            _send_events(world, e.entity, colliders, np.full(local.size, index), points[mine],
+                         -incoming[local] / max(e.cfg.beam_speed, _EPS), incoming[local], e.cfg.particle_mass,
+                         trigger=True)
+        splash = splashes[i]
+        if splash is None:
+            continue
+        _land(e.state, splash, repulsions[i])
+        local = hits[i] - bounds[i]
+        _send_events(world, e.entity, colliders, result.collider[hits[i]], splash.point, splash.normal,
+                     incoming[local], e.cfg.particle_mass)
+
+
+def _step(world: World, emitters: list[_Emitter], dt: float) -> None:
+    """One fixed step of ``emitters``, phase by phase (see the module docstring)."""
+    for e in emitters:  # loop over emitters
+        _advance(e, dt)
+    _collide(world, emitters)
+    for e in emitters:  # loop over emitters
+        buf = e.state.particles
+        n = buf.count
+        _remove_dead(buf, buf.age[:n] > np.add(buf.lifetime[:n], 1e-9, out=_SCRATCH.get("life", (n,))))
+        emit(e.cfg, e.state, e.transform, e.rng, dt)
 
 
 def step_emitter(world: World, entity: int, transform: Transform, cfg: EnergyWaveEmitter, state: EnergyWaveState,
                  dt: float) -> None:
-    """Advance one emitter by one fixed step (see the module docstring for the order)."""
-    buf = state.particles
-    if buf.capacity != cfg.max_particles:
-        buf.grow(cfg.max_particles)
-    rng = world.random.stream("energy_wave", entity)
-    state.time += dt
-    n = buf.count
-    buf.age[:n] += dt
-    _steer_irregular(cfg, state, transform, dt)
-    beam = np.flatnonzero(buf.pattern[:n] == BEAM)
-    start = buf.position[beam]  # a copy (fancy indexing)
-    buf.position[:n] += buf.velocity[:n] * dt
-    if beam.size:
-        _collide_beam(world, entity, cfg, state, rng, beam, start)
-    _remove_dead(buf, buf.age[: buf.count] > buf.lifetime[: buf.count] + 1e-9)
-    emit(cfg, state, transform, rng, dt)
+    """Advance one emitter by one fixed step."""
+    _step(world, [_Emitter(entity, transform, cfg, state, world.random.stream("energy_wave", entity))], dt)
 
 
 def simulate_system(world: World, dt: float) -> None:
-    """Simulation stage: step every emitter, ascending entity id."""
-    for entity, (transform, cfg, state) in world.query(Transform, EnergyWaveEmitter, EnergyWaveState):
-        step_emitter(world, entity, transform, cfg, state, dt)
+    """Simulation stage: step every emitter (ascending entity id), their beams swept together."""
+    emitters = [_Emitter(entity, transform, cfg, state, world.random.stream("energy_wave", entity))
+                for entity, (transform, cfg, state) in world.query(Transform, EnergyWaveEmitter, EnergyWaveState)]
+    _step(world, emitters, dt)
 
 
 # ------------------------------------------------------------------------------------------------------- queries

@@ -367,3 +367,48 @@ def test_sampled_crowded_cells_estimate_the_exact_sum():
     assert np.median(cos) > 0.9
     ratio = np.linalg.norm(sampled, axis=1).sum() / np.linalg.norm(exact, axis=1).sum()
     assert 0.8 < ratio < 1.25
+
+
+def _sampled_reference(query, pts, radius, limit):
+    """The sampled R (eq. 3.3) pair by pair, straight from the definition: the points in reach hashed into a table
+    of 2·n (a power of 2, at least 16) buckets, sorted by bucket (ties by index); for each query the buckets of the
+    27 cells around it (each bucket once, in ascending order); when some bucket holds more than ``limit``
+    points, sample k < limit of a bucket of count c sits at slot floor((k + phase)·c/taken) with weight c/taken,
+    the phase a golden-ratio sequence over the non-empty (query, bucket) pairs."""
+    from systems.energy_wave.neighbours import _GOLDEN, _hash, in_reach
+
+    near = pts[in_reach(pts, query, radius)]
+    table = 1 << max(4, (2 * len(near) - 1).bit_length())
+    keys = _hash(np.floor(near / radius).astype(np.int64), table)
+    near = near[np.argsort(keys, kind="stable")]
+    counts = np.bincount(keys, minlength=table)
+    starts = np.cumsum(counts) - counts
+    rows = []
+    for cell in np.floor(query / radius).astype(np.int64):
+        around = {int(_hash(cell + np.array(offset) - 1, table)) for offset in np.ndindex(3, 3, 3)}
+        rows.append(sorted(key for key in around if counts[key] > 0))
+    sampled = max(counts[key] for keys in rows for key in keys) > limit
+    out = np.zeros_like(query)
+    serial = 0
+    for i, keys in enumerate(rows):
+        for key in keys:
+            count = int(counts[key])
+            taken = min(count, limit) if sampled else count
+            stride = count / taken
+            phase = serial * _GOLDEN % 1.0 if sampled else 0.0
+            serial += 1
+            for k in range(taken):
+                d = query[i] - near[starts[key] + int((k + phase) * stride)]
+                d2 = float(d @ d)
+                if 1e-18 < d2 <= radius * radius:
+                    out[i] += stride * d / d2
+    return out
+
+
+def test_sampled_repulsion_equals_the_sampling_evaluated_pair_by_pair():
+    rng = np.random.default_rng(5)
+    pts = np.concatenate([rng.normal(0.0, 0.06, (1500, 3)), rng.uniform(-0.5, 0.5, (300, 3))])
+    query = np.concatenate([pts[:60], rng.uniform(-0.3, 0.3, (20, 3))])
+    got = neighbour_repulsion(query, pts, 0.1, 1.0, per_bucket_limit=16)
+    assert not np.allclose(got, neighbour_repulsion(query, pts, 0.1, 1.0))  # crowded cells were sampled
+    np.testing.assert_allclose(got, _sampled_reference(query, pts, 0.1, 16), rtol=1e-9, atol=1e-9)
