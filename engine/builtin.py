@@ -141,6 +141,15 @@ def _build_terrain(cfg: TerrainConfig, ctx: BuildContext) -> list:
     return [Terrain(cfg, field), Collider(shape="heightfield", heightfield=field)]
 
 
+def ground_height(world: World, x: float, z: float) -> float | None:
+    """World height of the first (lowest id) Terrain under world (x, z), placed by its Transform; None without one."""
+    for entity, (terrain,) in world.query(Terrain):
+        t = world.try_get(entity, Transform)
+        ox, oy, oz = t.position if t is not None else (0.0, 0.0, 0.0)
+        return float(terrain.field.height_at(np.array([x - ox]), np.array([z - oz]))[0] + oy)
+    return None
+
+
 def input_system(world: World, dt: float) -> None:
     """Input stage: fold the events due this tick into InputState (recording or replaying them)."""
     queue = world.resource(InputQueue)

@@ -25,7 +25,16 @@ ENTRY_POINT_GROUP = "ecsfx.plugins"
 
 
 class RegistryError(LookupError):
-    """An unknown or duplicate name; the message lists what is available."""
+    """An unknown or duplicate name; the message lists what is available.
+
+    For an unknown name, ``problem`` is the short statement ("unknown script 'spinn'") and ``suggestion``
+    the nearest registered name, so config errors can report them in their own fields.
+    """
+
+    def __init__(self, message: str, problem: str | None = None, suggestion: str | None = None) -> None:
+        super().__init__(message)
+        self.problem = problem or message
+        self.suggestion = suggestion
 
 
 @dataclass
@@ -138,19 +147,19 @@ class Registry:
         try:
             return self.components[name]
         except KeyError:
-            raise RegistryError(_unknown("component", name, self.components)) from None
+            raise _unknown("component", name, self.components) from None
 
     def script(self, name: str) -> type[Script]:
         try:
             return self.scripts[name]
         except KeyError:
-            raise RegistryError(_unknown("script", name, self.scripts)) from None
+            raise _unknown("script", name, self.scripts) from None
 
     def command(self, name: str) -> Callable[..., Any]:
         try:
             return self.commands[name]
         except KeyError:
-            raise RegistryError(_unknown("command", name, self.commands)) from None
+            raise _unknown("command", name, self.commands) from None
 
     def preset_component(self, preset_dir: str) -> ComponentSpec | None:
         for spec in self.components.values():
@@ -165,10 +174,11 @@ class Registry:
         self.plugins.append(plugin.name)
 
 
-def _unknown(kind: str, name: str, known: Iterable[str]) -> str:
+def _unknown(kind: str, name: str, known: Iterable[str]) -> RegistryError:
     close = suggest(name, known)
     hint = f"; did you mean '{close}'?" if close else ""
-    return f"unknown {kind} '{name}'{hint} (registered: {', '.join(sorted(known)) or 'none'})"
+    problem = f"unknown {kind} '{name}'"
+    return RegistryError(f"{problem}{hint} (registered: {', '.join(sorted(known)) or 'none'})", problem, close)
 
 
 def discover_plugins(names: Iterable[str] | None = None) -> list[Plugin]:
@@ -181,7 +191,7 @@ def discover_plugins(names: Iterable[str] | None = None) -> list[Plugin]:
         wanted = list(names)
         for name in wanted:
             if name not in available:
-                raise RegistryError(_unknown("plugin", name, available))
+                raise _unknown("plugin", name, available)
     return [available[n].load() for n in wanted]
 
 

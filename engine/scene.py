@@ -27,7 +27,7 @@ from typing import Any
 from pydantic import Field
 
 from engine.config import (ConfigError, ConfigModel, Problem, Vec3, deep_merge, locate_line, model_problems,
-                           read_toml, resolve_inside, suggest)
+                           format_key, read_toml, resolve_inside, suggest)
 from engine.registry import BuildContext, Registry, RegistryError
 from engine.script import Scripts, make_slot
 from engine.world import World
@@ -195,8 +195,7 @@ def load_component(registry: Registry, cname: str, values: dict, file: Path, tex
     try:
         spec = registry.component(cname)
     except RegistryError as exc:
-        raise ConfigError([Problem(str(file), _fmt(key), str(exc).split(" (registered")[0].split("; did")[0],
-                                   suggestion=suggest(cname, registry.components),
+        raise ConfigError([Problem(str(file), format_key(key), exc.problem, suggestion=exc.suggestion,
                                    line=locate_line(text, key))]) from None
     values = dict(values)
     preset_name = values.pop("preset", None)
@@ -213,9 +212,9 @@ def load_component(registry: Registry, cname: str, values: dict, file: Path, tex
     except ValidationError as exc:
         problems = []
         for p in model_problems(exc, spec.model, str(file), key, text):
-            top = p.key[len(_fmt(key)) + 1:].split(".")[0].split("[")[0]
+            top = p.key[len(format_key(key)) + 1:].split(".")[0].split("[")[0]
             if preset_file is not None and top in preset and top not in values:
-                sub = p.key[len(_fmt(key)) + 1:]
+                sub = p.key[len(format_key(key)) + 1:]
                 line = locate_line(preset_text, sub.replace("[", ".[").split(".")) if sub else None
                 p = Problem(str(preset_file), sub, p.message, p.value, p.suggestion, line)
             problems.append(p)
@@ -223,7 +222,7 @@ def load_component(registry: Registry, cname: str, values: dict, file: Path, tex
 
 
 def _load_preset(spec, preset_name: Any, file: Path, text: str, key: tuple, root: Path):
-    where = dict(file=str(file), key=_fmt(key + ("preset",)), line=locate_line(text, key + ("preset",)))
+    where = dict(file=str(file), key=format_key(key + ("preset",)), line=locate_line(text, key + ("preset",)))
     if not isinstance(preset_name, str):
         raise ConfigError([Problem(message="expected a preset name string", value=preset_name, **where)])
     if spec.preset_dir is None:
@@ -248,19 +247,13 @@ def _load_script(registry: Registry, ref: ScriptRef, file: Path, text: str, key:
     try:
         cls = registry.script(ref.name)
     except RegistryError as exc:
-        raise ConfigError([Problem(str(file), _fmt(key + ("name",)), str(exc).split("; did")[0].split(" (reg")[0],
-                                   suggestion=suggest(ref.name, registry.scripts),
+        raise ConfigError([Problem(str(file), format_key(key + ("name",)), exc.problem, suggestion=exc.suggestion,
                                    line=locate_line(text, key + ("name",)))]) from None
     try:
         return cls, cls.Params.model_validate(ref.params)
     except ValidationError as exc:
         raise ConfigError(model_problems(exc, cls.Params, str(file), key + ("params",), text)) from None
 
-
-def _fmt(key: tuple) -> str:
-    from engine.config import format_key
-
-    return format_key(key)
 
 
 @dataclass

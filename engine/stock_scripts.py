@@ -129,15 +129,12 @@ class SnapToGround(Script):
         offset: float = Field(0.0, ge=-1000.0, le=1000.0, description="Metres above the ground.")
 
     def on_start(self) -> None:
-        from engine.builtin import Terrain
+        from engine.builtin import ground_height
 
         t = self.ctx.get(Transform)
-        for entity, (terrain,) in self.ctx.query(Terrain):
-            origin = self.ctx.world.try_get(entity, Transform)
-            o = origin.position if origin is not None else np.zeros(3)
-            ground = terrain.field.height_at(np.array([t.position[0] - o[0]]), np.array([t.position[2] - o[2]]))[0]
-            t.position[1] = float(ground + o[1] + self.params.offset)
-            return
+        ground = ground_height(self.ctx.world, float(t.position[0]), float(t.position[2]))
+        if ground is not None:
+            t.position[1] = ground + self.params.offset
 
 
 SCRIPTS = [Spin, Bob, WasdMover, Spawner, Lifetime, SnapToGround]

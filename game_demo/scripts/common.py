@@ -4,10 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import numpy as np
-
 from engine.builtin import Name, Terrain
-from engine.spatial import Transform
+from engine.builtin import ground_height as engine_ground_height
 
 PATTERNS = "ABCDEFGH"
 
@@ -55,11 +53,8 @@ def find_named(ctx, name: str) -> int | None:
 
 def ground_height(ctx, x: float, z: float) -> float:
     """Terrain height under (x, z) in world space (0 without terrain)."""
-    for entity, (terrain,) in ctx.query(Terrain):
-        t = ctx.world.try_get(entity, Transform)
-        ox, oy, oz = (t.position if t is not None else np.zeros(3))
-        return float(terrain.field.height_at(np.array([x - ox]), np.array([z - oz]))[0] + oy)
-    return 0.0
+    height = engine_ground_height(ctx.world, x, z)
+    return 0.0 if height is None else height
 
 
 def terrain_extent(ctx) -> float:

@@ -243,19 +243,10 @@ def test_the_real_entry_point_prints_no_traceback(tmp_path):
 
 
 # ------------------------------------------------------------------------------------------ hot reload
-class TankConfig(ConfigModel):
-    rate: float = Field(1.0, ge=0.0, le=100.0)
-    capacity: int = Field(4, ge=1, le=1000)
+from tests.engine.test_reload import PumpConfig, PumpState, pump_system  # noqa: E402
 
-
-@dataclass
-class TankState:
-    levels: np.ndarray
-
-
-def tank_system(world, dt):
-    for _, (cfg, state) in world.query(TankConfig, TankState):
-        state.levels += cfg.rate
+# the test component of test_reload.py (a rate and a capacity-sized array), under the name "Tank"
+TankConfig, TankState, tank_system = PumpConfig, PumpState, pump_system
 
 
 def tank_build(cfg, ctx):
