@@ -315,8 +315,22 @@ def _fullscreen(renderer: Renderer, frag: str) -> moderngl.VertexArray:
     return vao
 
 
-def present_execute(renderer: Renderer, pc, view: View, final_handle, first: bool) -> None:
-    """Tone-map a view's HDR colour into its rectangle of the window image (with a frame when partial)."""
+def tonemap_execute(renderer: Renderer, pc, view: View, ldr_handle) -> None:
+    """Tone-map a view's HDR colour at the view's own size into an 8-bit display-referred target."""
+    fbo = renderer.framebuffer(pc.get(ldr_handle))
+    fbo.use()
+    renderer.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
+    fbo.viewport = (0, 0, view.width, view.height)
+    vao = _fullscreen(renderer, "tonemap.frag")
+    pc.get(view.color).use(0)
+    set_uniforms(vao.program, hdr=0, exposure=renderer.settings.exposure)
+    vao.render(moderngl.TRIANGLES, vertices=3)
+
+
+def present_execute(renderer: Renderer, pc, view: View, final_handle, first: bool, ldr_handle=None) -> None:
+    """Put a view into its rectangle of the window image (with a frame when partial): tone-map its HDR
+    colour there, or, when it was already tone-mapped at a smaller size (``ldr_handle``), upscale it
+    bilinearly."""
     ctx = renderer.ctx
     fbo = renderer.framebuffer(pc.get(final_handle))
     fbo.use()
@@ -328,9 +342,14 @@ def present_execute(renderer: Renderer, pc, view: View, final_handle, first: boo
     if not full:
         fbo.clear(*view.extra["border"], 1.0, viewport=(x - 2, y - 2, w + 4, h + 4))
     fbo.viewport = (x, y, w, h)
-    vao = _fullscreen(renderer, "tonemap.frag")
-    pc.get(view.color).use(0)
-    set_uniforms(vao.program, hdr=0, exposure=renderer.settings.exposure)
+    if ldr_handle is None:
+        vao = _fullscreen(renderer, "tonemap.frag")
+        pc.get(view.color).use(0)
+        set_uniforms(vao.program, hdr=0, exposure=renderer.settings.exposure)
+    else:
+        vao = _fullscreen(renderer, "upscale.frag")
+        pc.get(ldr_handle).use(0)
+        set_uniforms(vao.program, image=0)
     vao.render(moderngl.TRIANGLES, vertices=3)
     fbo.viewport = (0, 0, renderer.width, renderer.height)
 

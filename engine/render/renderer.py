@@ -285,16 +285,34 @@ class Renderer:
         graph.add_pass(f"clear.{view.name}", setup, execute)
 
     def _declare_present(self, graph, final, view: View, first: bool):
-        """Tone-map ``view`` straight into its rectangle of the window image (no intermediate copy)."""
-        from engine.render.passes import present_execute
+        """Tone-map ``view`` into its rectangle of the window image.
+
+        At full scale the tone map writes the window image directly.  Below full scale (``render_scale``) the
+        view is tone-mapped at its own size into an 8-bit target and then upscaled bilinearly: the display
+        transform (ACES fit + gamma, ~4x the cost of a texture fetch per pixel on a software rasteriser) runs
+        on scale² of the pixels, as upscalers do (they work on display-referred colour).
+        """
+        from engine.render.passes import present_execute, tonemap_execute
 
         out = {}
+        x, y, w, h = view.extra["rect"]
+        source = view.color
+        if (view.width, view.height) != (w, h):
+            def tonemap_setup(b):
+                b.read(view.color)
+                out["ldr"] = b.write(b.create(f"{view.name}.ldr", TextureDesc(view.width, view.height, "rgba8")))
+
+            graph.add_pass(f"tonemap.{view.name}", tonemap_setup,
+                           lambda pc: tonemap_execute(self, pc, view, out["ldr"]))
+            source = None
 
         def setup(b):
-            b.read(view.color)
+            b.read(view.color if source is not None else out["ldr"])
             out["final"] = b.write(final)
 
-        graph.add_pass(f"present.{view.name}", setup, lambda pc: present_execute(self, pc, view, out["final"], first))
+        graph.add_pass(f"present.{view.name}", setup,
+                       lambda pc: present_execute(self, pc, view, out["final"], first,
+                                                  None if source is not None else out["ldr"]))
         return out["final"]
 
     # ----------------------------------------------------------------- pictures

@@ -110,3 +110,20 @@ def test_render_scale_draws_views_smaller_and_presents_full_size():
     image = render_app(app, frames=1)
     assert (renderer.views[0].width, renderer.views[0].height) == (80, 48)
     assert image.size == (160, 96) and np.asarray(image).std() > 5
+
+
+def test_render_scale_tone_maps_at_view_size_then_upscales():
+    """Below full scale the display transform runs at the view's size and the result is upscaled; the image
+    matches a full-scale render up to the resolution change."""
+    images = {}
+    for scale in (1.0, 0.5):
+        app = App(SCENE)
+        app.config.render.render_scale = scale
+        renderer = make_renderer(app, 160, 96)
+        images[scale] = np.asarray(render_app(app, frames=1), np.float32)
+        order = renderer.declare().compile().order
+        renderer.release()
+        app.renderer = None
+        assert ("tonemap.view0" in order) == (scale < 1.0)
+        assert "present.view0" in order
+    assert np.abs(images[1.0] - images[0.5]).mean() < 3.0  # 0.8 measured; an untoned or unscaled view is far off
