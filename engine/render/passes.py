@@ -1,7 +1,7 @@
 """The engine's own render features: sky, terrain, lit meshes, tone mapping, composition, HUD text.
 
 Meshes are drawn instanced, one draw call per primitive shape; the terrain mesh is uploaded once per
-height field and drawn with a colour ramp.
+height field and drawn chunk by chunk at a level of detail per view (engine/render/terrain.py).
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ from engine.builtin import Terrain
 from engine.render.components import Hud, MeshConfig
 from engine.render.feature import OPAQUE, OVERLAY, SKY, RenderFeature, View
 from engine.render.graph import TextureDesc
+from engine.render.terrain import TerrainChunks, build_terrain_chunks, draw_ranges, select_levels
 from engine.spatial import Transform, model_matrices
 
 if TYPE_CHECKING:
@@ -102,6 +103,7 @@ class SkyFeature(RenderFeature):
 @dataclass
 class _TerrainMesh:
     key: tuple
+    chunks: TerrainChunks
     vao: moderngl.VertexArray
     vbo: moderngl.Buffer
     ibo: moderngl.Buffer
@@ -112,30 +114,17 @@ class _TerrainMesh:
             obj.release()
 
 
-def terrain_mesh_arrays(field) -> tuple[np.ndarray, np.ndarray]:
-    """Interleaved position+normal vertices (float32) and triangle indices (uint32) of a height field."""
-    h = np.asarray(field.heights, np.float64)
-    rows, cols = h.shape
-    xs = field.origin[0] + np.arange(cols) * field.spacing
-    zs = field.origin[1] + np.arange(rows) * field.spacing
-    gx, gz = np.meshgrid(xs, zs)
-    dz, dx = np.gradient(h, field.spacing)
-    normals = np.stack([-dx, np.ones_like(h), -dz], axis=-1)
-    normals /= np.linalg.norm(normals, axis=-1, keepdims=True)
-    verts = np.concatenate([np.stack([gx, h, gz], axis=-1), normals], axis=-1).reshape(-1, 6).astype(np.float32)
-    r, c = np.meshgrid(np.arange(rows - 1), np.arange(cols - 1), indexing="ij")
-    i0 = (r * cols + c).ravel()
-    quads = np.stack([i0, i0 + cols, i0 + 1, i0 + 1, i0 + cols, i0 + cols + 1], axis=-1)
-    return verts, quads.astype(np.uint32).ravel()
-
-
 class TerrainFeature(RenderFeature):
+    """Height-field terrains, chunked with a level of detail per view (engine/render/terrain.py)."""
+
     name = "terrain"
     phase = OPAQUE
 
     def __init__(self, renderer: Renderer) -> None:
         super().__init__(renderer)
         self._meshes: dict[int, _TerrainMesh] = {}
+        self.last_draws: dict[str, int] = {}  # view name -> draw calls issued last frame (tests, profiling)
+        self.last_triangles: dict[str, int] = {}
 
     def extract(self, world) -> list:
         out = []
@@ -151,11 +140,12 @@ class TerrainFeature(RenderFeature):
         if mesh is not None:
             mesh.release()
         prog = self._program()
-        verts, idx = terrain_mesh_arrays(terrain.field)
-        vbo, ibo = self.ctx.buffer(verts.tobytes()), self.ctx.buffer(idx.tobytes())
-        vao = self.ctx.vertex_array(prog, [(vbo, "3f 3f", "in_position", "in_normal")], ibo)
+        chunks = build_terrain_chunks(terrain.field)
+        vbo, ibo = self.ctx.buffer(chunks.vertices.tobytes()), self.ctx.buffer(chunks.indices.tobytes())
+        vao = self.ctx.vertex_array(prog, [(vbo, "3f 3f 1f", "in_position", "in_normal", "in_skirt")], ibo,
+                                    index_element_size=4)
         h = terrain.field.heights
-        mesh = _TerrainMesh(key, vao, vbo, ibo, (float(h.min()), float(h.max())))
+        mesh = _TerrainMesh(key, chunks, vao, vbo, ibo, (float(h.min()), float(h.max())))
         self._meshes[entity] = mesh
         return mesh
 
@@ -173,14 +163,24 @@ class TerrainFeature(RenderFeature):
             self.ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
             prog = self._program()
             set_uniforms(prog, **lighting_uniforms(self.renderer, view))
+            draws = triangles = 0
             for entity, key, terrain, model in data:
                 mesh = self._mesh(entity, key, terrain)
+                levels = select_levels(mesh.chunks, model, view.view_proj, view.proj, view.camera_pos,
+                                       view.height, view.ortho, terrain.config.lod_pixels)
+                ranges = draw_ranges(mesh.chunks, levels)
+                if not ranges:
+                    continue
                 colors = np.zeros((8, 3), np.float32)
                 ramp = np.array(terrain.config.colors, np.float32)
                 colors[: len(ramp)] = ramp
                 set_uniforms(prog, model=model.T.copy(), ramp=colors, ramp_count=len(ramp),
                              height_range=mesh.height_range)
-                mesh.vao.render(moderngl.TRIANGLES)
+                for first, count in ranges:
+                    mesh.vao.render(moderngl.TRIANGLES, vertices=count, first=first)
+                draws += len(ranges)
+                triangles += sum(c for _, c in ranges) // 3
+            self.last_draws[view.name], self.last_triangles[view.name] = draws, triangles
 
         graph.add_pass(f"terrain.{view.name}", opaque_setup(view), execute)
 

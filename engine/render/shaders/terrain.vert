@@ -1,7 +1,7 @@
 #version 330
 // Height-field terrain, lit per vertex (Gouraud): a terrain's normals vary smoothly, and per-vertex
-// lighting costs the 16k vertices of a 129² field instead of every covered pixel (about 3x cheaper on
-// software rasterisers).  Colour ramp by normalised height, steep slopes darkened towards rock.
+// lighting costs the vertices of the chunks drawn (engine/render/terrain.py) instead of every covered pixel
+// (about 3x cheaper on software rasterisers).  Colour ramp by normalised height, steep slopes darkened towards rock.
 #include "lit.glsl"
 uniform mat4 view_proj;
 uniform mat4 model;
@@ -10,6 +10,7 @@ uniform int ramp_count;
 uniform vec2 height_range;
 in vec3 in_position;
 in vec3 in_normal;
+in float in_skirt;  // > 0 on skirt vertices: lowered by this much after shading (hides LOD cracks)
 out vec3 v_color;
 void main() {
     vec4 world = model * vec4(in_position, 1.0);
@@ -20,5 +21,6 @@ void main() {
     vec3 albedo = mix(ramp[i], ramp[i + 1], x - float(i));
     albedo = mix(albedo * 0.7, albedo, smoothstep(0.55, 0.85, n.y));
     v_color = fog(shade(albedo, n, world.xyz, 16.0, 0.03), world.xyz);
+    world.y -= in_skirt;
     gl_Position = view_proj * world;
 }
