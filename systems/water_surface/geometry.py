@@ -7,7 +7,7 @@ common vertex count V; ``counts[b]`` says how many of body b's vertices are real
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -55,23 +55,30 @@ class Bodies:
     radius: F64  # (B,) sphere radius in world units
     position: F64  # (B, 3)
     rotation: F64  # (B, 3, 3) rotation matrices (column vectors: world = R @ local)
+    _extent: F64 | None = field(default=None, repr=False, compare=False)
 
     def __len__(self) -> int:
         return len(self.entities)
 
     def take(self, index) -> Bodies:
+        extent = None if self._extent is None else self._extent[index]
         return Bodies(self.entities[index], self.shapes[index], self.half[index], self.radius[index],
-                      self.position[index], self.rotation[index])
+                      self.position[index], self.rotation[index], extent)
+
+    def extent(self) -> F64:
+        """(B, 3) half size of each body's axis-aligned bounding box in x, y, z (computed once)."""
+        if self._extent is None:
+            box = np.einsum("bij,bj->bi", np.abs(self.rotation), self.half)
+            self._extent = np.where((self.shapes == SPHERE)[:, None], self.radius[:, None], box)
+        return self._extent
 
     def horizontal_half(self) -> F64:
         """(B, 2) half size of each body's axis-aligned footprint in x and z."""
-        box = np.einsum("bij,bj->bi", np.abs(self.rotation), self.half)[:, [0, 2]]
-        return np.where((self.shapes == SPHERE)[:, None], self.radius[:, None], box)
+        return self.extent()[:, ::2]
 
     def vertical_half(self) -> F64:
         """(B,) half height of each body's vertical extent."""
-        box = np.einsum("bj,bj->b", np.abs(self.rotation[:, 1, :]), self.half)
-        return np.where(self.shapes == SPHERE, self.radius, box)
+        return self.extent()[:, 1]
 
 
 def empty_bodies() -> Bodies:
@@ -82,7 +89,24 @@ def empty_bodies() -> Bodies:
 def bilinear(field: F64, uv: F64) -> F64:
     """Bilinear height of ``field[j, i]`` at (u, v) (..., 2), clamped to the grid (eq. 2.2; on a grid edge it is the
     linear interpolation of eq. 2.3 / 2.4)."""
-    return bilinear_with_slope(field, uv)[0]
+    return bilinear_fields((field,), uv)[0]
+
+
+def bilinear_fields(fields: tuple, uv: F64) -> list:
+    """:func:`bilinear` of several fields of the same shape at the same points (M, 2), sharing the lookups."""
+    nz, nx = fields[0].shape
+    c = np.minimum(np.maximum(uv, 0.0), (nx - 1, nz - 1))
+    ij = np.minimum(c.astype(np.int64), (nx - 2, nz - 2))
+    t = c - ij
+    flat = ij @ (1, nx)
+    corners = flat[..., None] + (0, 1, nx, nx + 1)  # z00, z10, z01, z11
+    tu, tv = t[..., 0:1], t[..., 1]
+    out = []
+    for f in fields:
+        q = f.ravel()[corners]
+        edge = q[..., 0::2] + tu * (q[..., 1::2] - q[..., 0::2])  # bottom (v = j), top (v = j + 1)
+        out.append(edge[..., 0] + tv * (edge[..., 1] - edge[..., 0]))
+    return out
 
 
 def bilinear_with_slope(field: F64, uv: F64) -> tuple[F64, F64, F64]:

@@ -56,16 +56,15 @@ _HALF_CELLS = np.array([(0, 0), (1, 0), (-1, 1), (0, 1), (1, 1)], np.int64)  # t
 @dataclass
 class Edges:
     """The edges k → k + 1 of padded polygons (B, V): start, direction, and the inward half-plane of each
-    (n·p > c inside; padding edges have n = 0, c = −∞ so every point is inside them)."""
+    (n·p > c inside; padding edges have n = 0, c = −∞ so every point is inside them). Points are (…, 2) arrays,
+    so one numpy call handles both coordinates."""
 
-    ax: F64
-    ay: F64
-    ex: F64
-    ey: F64
-    nx: F64
-    ny: F64
-    c: F64
-    valid: np.ndarray
+    start: F64  # (B, V, 2)
+    e: F64  # (B, V, 2) end − start
+    n: F64  # (B, V, 2) inward unit normal (0 on padding and zero-length edges)
+    c: F64  # (B, V)
+    valid: np.ndarray  # (B, V)
+    length2: F64  # (B, V) |e|², 1 where it is 0 (a safe divisor)
 
     @staticmethod
     def of(polygons: F64, counts: I64) -> Edges:
@@ -73,23 +72,27 @@ class Edges:
         k = np.arange(v)
         valid = k < counts[:, None]
         nxt = np.where(k + 1 < counts[:, None], k + 1, 0)
-        start = polygons
-        end = polygons[np.arange(b)[:, None], nxt]
-        ex, ey = end[..., 0] - start[..., 0], end[..., 1] - start[..., 1]
-        length = np.hypot(ex, ey)
+        e = polygons[np.arange(b)[:, None], nxt] - polygons
+        ee = e * e
+        length2 = ee[..., 0] + ee[..., 1]
+        length = np.hypot(e[..., 0], e[..., 1])
         real = valid & (length > 0.0)
-        inv = 1.0 / np.where(real, length, 1.0)
-        nx, ny = np.where(real, -ey * inv, 0.0), np.where(real, ex * inv, 0.0)
-        c = np.where(real, nx * start[..., 0] + ny * start[..., 1], -np.inf)
-        return Edges(start[..., 0], start[..., 1], ex, ey, nx, ny, c, valid)
+        inv = np.where(real, 1.0 / np.where(real, length, 1.0), 0.0)
+        n = e[..., ::-1] * (inv[..., None] * _FLIP)  # (−e_y, e_x) / |e|: the inward (left) normal
+        np_ = n * polygons
+        c = np.where(real, np_[..., 0] + np_[..., 1], -np.inf)
+        return Edges(polygons, e, n, c, valid, np.where(length2 > 0.0, length2, 1.0))
 
     def inside(self, points: F64, body: I64, margin: float) -> np.ndarray:
         """Whether ``points[p]`` lies inside polygon ``body[p]`` by more than ``margin`` (negative: on or near the
         outline counts too). Polygons with fewer than 3 vertices contain nothing."""
         if len(points) == 0:
             return np.zeros(0, bool)
-        d = self.nx[body] * points[:, :1] + self.ny[body] * points[:, 1:] - self.c[body]
-        return np.all(d > margin, axis=1) & (self.valid[body, 2])
+        d = self.n[body] * points[:, None, :]
+        return ((d[..., 0] + d[..., 1] - self.c[body]) > margin).all(axis=1) & self.valid[body, 2]
+
+
+_FLIP = np.array([-1.0, 1.0])
 
 
 @dataclass
@@ -272,35 +275,34 @@ def added_points(sections: Sections, entities: I64, grid: Grid) -> tuple[AddedPo
 
 def _outline(sections: Sections, strict: bool):
     """Vertices and crossings (unsorted) with a sort key ordering them along the outline (body, edge, t);
-    None if, with ``strict``, an edge crosses a grid vertex."""
+    None if, with ``strict``, an edge crosses a grid vertex. Both families of grid lines (u = i: axis 0, v = j:
+    axis 1) are handled in one pass over the (edge, axis) pairs."""
     e = sections.edges
     eb, ek = np.nonzero(e.valid)
-    ax, ay, ex, ey = e.ax[eb, ek], e.ay[eb, ek], e.ex[eb, ek], e.ey[eb, ek]
-    efeat = sections.edge_feature[eb, ek]
+    a, d = e.start[eb, ek], e.e[eb, ek]  # (E, 2)
     base = (eb * sections.polygons.shape[1] + ek).astype(np.float64) * 2.0  # edge index; t ∈ (0, 1) after it
-    uv = [np.stack([ax, ay], -1)]
-    kinds = [np.full(len(eb), 2, np.int8)]
-    features = [sections.vertex_feature[eb, ek]]
-    lines = [np.zeros(len(eb), np.int64)]
-    bodies = [eb]
-    keys = [base]
-    for axis, (a, d, a2, d2) in enumerate(((ax, ex, ay, ey), (ay, ey, ax, ex))):
-        lo = np.floor(np.minimum(a, a + d)).astype(np.int64)
-        hi = np.floor(np.maximum(a, a + d)).astype(np.int64)
-        run, line = ranges(lo + 1, hi - lo)
-        t = (line - a[run]) / d[run]
-        other = a2[run] + t * d2[run]
-        if strict and axis == 0 and np.any(np.abs(other - np.round(other)) < EPS_LINE):
-            return None
-        point = np.empty((len(run), 2))
-        point[:, axis], point[:, 1 - axis] = line, other
-        uv.append(point)
-        kinds.append(np.full(len(run), axis, np.int8))
-        features.append(efeat[run])
-        lines.append(line)
-        bodies.append(eb[run])
-        keys.append(base[run] + t)
-    return tuple(np.concatenate(c) for c in (uv, kinds, features, lines, bodies, keys))
+    b = a + d
+    lo = np.floor(np.minimum(a, b)).astype(np.int64)
+    hi = np.floor(np.maximum(a, b)).astype(np.int64)
+    run, line = ranges((lo + 1).ravel(), (hi - lo).ravel())  # run = 2·edge + axis
+    edge, axis = run >> 1, run & 1
+    af, df = a.ravel(), d.ravel()
+    t = (line - af[run]) / df[run]
+    other = af[run ^ 1] + t * df[run ^ 1]
+    if strict and np.any((np.abs(other - np.rint(other)) < EPS_LINE) & (axis == 0)):
+        return None
+    on_u = axis == 0
+    point = np.empty((len(run), 2))
+    point[:, 0] = np.where(on_u, line, other)
+    point[:, 1] = np.where(on_u, other, line)
+    n = len(eb)
+    kind = np.empty(n + len(run), np.int8)
+    kind[:n] = 2
+    kind[n:] = axis
+    return (np.concatenate([a, point]), kind,
+            np.concatenate([sections.vertex_feature[eb, ek], sections.edge_feature[eb, ek][edge]]),
+            np.concatenate([np.zeros(n, np.int64), line]), np.concatenate([eb, eb[edge]]),
+            np.concatenate([base, base[edge] + t]))
 
 
 # ---------------------------------------------------------------------------------------- wave generation
@@ -334,15 +336,15 @@ def outline_impulse(points: AddedPoints, sections: Sections, previous: Sections,
 
 def nearest_on_outline(points: F64, body: I64, edges: Edges) -> F64:
     """The point of polygon ``body[p]``'s outline nearest to ``points[p]``."""
-    ax, ay, ex, ey = edges.ax[body], edges.ay[body], edges.ex[body], edges.ey[body]
-    px, py = points[:, :1], points[:, 1:]
-    length2 = ex * ex + ey * ey
-    t = np.clip(((px - ax) * ex + (py - ay) * ey) / np.where(length2 > 0.0, length2, 1.0), 0.0, 1.0)
-    fx, fy = ax + t * ex, ay + t * ey
-    dist2 = np.where(edges.valid[body], (fx - px) ** 2 + (fy - py) ** 2, np.inf)
-    best = np.argmin(dist2, axis=1)
-    rows = np.arange(len(points))
-    return np.stack([fx[rows, best], fy[rows, best]], axis=-1)
+    a, e = edges.start[body], edges.e[body]  # (P, V, 2)
+    r = points[:, None, :] - a
+    re = r * e
+    t = np.minimum(np.maximum((re[..., 0] + re[..., 1]) / edges.length2[body], 0.0), 1.0)
+    foot = a + t[..., None] * e
+    gap = foot - points[:, None, :]
+    gap *= gap
+    dist2 = np.where(edges.valid[body], gap[..., 0] + gap[..., 1], np.inf)
+    return foot[np.arange(len(points)), np.argmin(dist2, axis=1)]
 
 
 # ------------------------------------------------------------------------------------------- coupling
@@ -353,38 +355,43 @@ def solid_vertices(sections: Sections, grid: Grid) -> tuple[I64, I64]:
     Scanline fill: every grid row v = j through a polygon meets its outline at two points (it is convex, and its
     vertices are off the grid lines); the vertices strictly between them are inside.
     """
-    p, counts = sections.polygons, sections.counts
-    valid = np.arange(p.shape[1]) < counts[:, None]
-    v = np.where(valid, p[..., 1], np.nan)
-    cut = counts >= 3
-    lo = np.where(cut, np.maximum(np.ceil(np.nanmin(np.where(cut[:, None], v, 0.0), axis=1)), 0), 0)
-    hi = np.where(cut, np.minimum(np.floor(np.nanmax(np.where(cut[:, None], v, 0.0), axis=1)), grid.nz - 1), -1)
-    lo, hi = lo.astype(np.int64), hi.astype(np.int64)
+    e = sections.edges
+    v = sections.polygons[..., 1]
+    cut = sections.counts >= 3
+    lo = np.where(cut, np.maximum(np.ceil(np.where(e.valid, v, np.inf).min(axis=1)), 0), 0).astype(np.int64)
+    hi = np.where(cut, np.minimum(np.floor(np.where(e.valid, v, -np.inf).max(axis=1)), grid.nz - 1),
+                  -1).astype(np.int64)
     body, row = ranges(lo, np.maximum(hi - lo + 1, 0))
     if len(body) == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    e = sections.edges
-    ay, ey, ax, ex = e.ay[body], e.ey[body], e.ax[body], e.ex[body]
-    t = (row[:, None] - ay) / np.where(ey != 0.0, ey, np.inf)
-    crosses = e.valid[body] & (t >= 0.0) & (t < 1.0) & (ey != 0.0)
-    u = ax + t * ex
-    left = np.min(np.where(crosses, u, np.inf), axis=1)
-    right = np.max(np.where(crosses, u, -np.inf), axis=1)
-    first = np.maximum(np.floor(left + 1e-9).astype(np.int64) + 1, 0)
-    last = np.minimum(np.ceil(right - 1e-9).astype(np.int64) - 1, grid.nx - 1)
-    ok = np.isfinite(left) & np.isfinite(right)
-    first, last = np.where(ok, first, 0), np.where(ok, last, -1)
+    a, d = e.start[body], e.e[body]  # (R, V, 2)
+    ay, ey = a[..., 1], d[..., 1]
+    flat = ey != 0.0
+    t = (row[:, None] - ay) / np.where(flat, ey, np.inf)
+    u = a[..., 0] + t * d[..., 0]
+    crosses = e.valid[body] & (t >= 0.0) & (t < 1.0) & flat
+    left = np.where(crosses, u, np.inf).min(axis=1)
+    right = np.where(crosses, u, -np.inf).max(axis=1)
+    ok = (left < np.inf) & (right > -np.inf)
+    first = np.where(ok, np.maximum(np.floor(left + 1e-9).astype(np.int64) + 1, 0), 0)
+    last = np.where(ok, np.minimum(np.ceil(right - 1e-9).astype(np.int64) - 1, grid.nx - 1), -1)
     run, i = ranges(first, np.maximum(last - first + 1, 0))
     return row[run] * grid.nx + i, body[run]
+
+
+_CORNER_OFFSETS = np.array([[0, 0], [1, 0], [0, 1], [1, 1]])  # (i, j) offsets of a square's corners
+_DENSE_PAIRS = 96  # up to this many added points, their pairs come from the full distance matrix
 
 
 def coupling_pairs(points: AddedPoints, fluid: np.ndarray, grid: Grid) -> tuple[I64, I64, F64, I64, I64, F64]:
     """Neighbours within radius h for eq. 2.11 / 2.12, with weights r_k / h = 1 − distance / h.
 
     Returns (grid vertex, added point, weight) for the pairs between the grid and the added points (vertices
-    inside a body excluded), and (point, point, weight) for the pairs of added points, both directions. Points
-    within h of each other lie in the same or neighbouring squares: they are found by sorting the points by
-    square and looking up each point's own square and half of the 8 around it (the other half finds it).
+    inside a body excluded), and (point, point, weight) for the pairs of added points, both directions. A grid
+    vertex within h of a point is a corner of the point's square. Few points: their pairs come from the full
+    distance matrix; many: points within h of each other lie in the same or neighbouring squares, so they are
+    found by sorting the points by square and looking up each point's own square and half of the 8 around it
+    (the other half finds it).
     """
     m = len(points)
     if m == 0:
@@ -392,15 +399,22 @@ def coupling_pairs(points: AddedPoints, fluid: np.ndarray, grid: Grid) -> tuple[
         return z, z, np.zeros(0), z, z, np.zeros(0)
     uv = points.uv
     base = np.floor(uv).astype(np.int64)
-    ci = base[:, 0:1] + np.array([[0, 1, 0, 1]])
-    cj = base[:, 1:2] + np.array([[0, 0, 1, 1]])
-    dist = np.hypot(ci - uv[:, :1], cj - uv[:, 1:])
-    ok = (dist < 1.0) & (ci >= 0) & (ci < grid.nx) & (cj >= 0) & (cj < grid.nz)
-    flat = np.where(ok, cj * grid.nx + ci, 0)
+    corner = base[:, None, :] + _CORNER_OFFSETS  # (M, 4, 2) as (i, j)
+    gap = corner - uv[:, None, :]
+    dist = np.hypot(gap[..., 0], gap[..., 1])
+    ok = (dist < 1.0) & (corner[..., 0] < grid.nx) & (corner[..., 1] < grid.nz)  # points lie on the footprint
+    flat = np.where(ok, corner[..., 1] * grid.nx + corner[..., 0], 0)
     ok &= fluid.ravel()[flat]
     p_idx, c_idx = np.nonzero(ok)
     g = flat[p_idx, c_idx]
     w = 1.0 - dist[p_idx, c_idx]
+    if m <= _DENSE_PAIRS:
+        diff = uv[:, None, :] - uv[None, :, :]
+        dd = np.hypot(diff[..., 0], diff[..., 1])
+        close = dd < 1.0
+        np.fill_diagonal(close, False)
+        a, b = np.nonzero(close)
+        return g, p_idx, w, a, b, 1.0 - dd[a, b]
     stride = grid.nx + 3
     cell = (base[:, 1] + 1) * stride + base[:, 0] + 1
     order = np.argsort(cell, kind="stable")

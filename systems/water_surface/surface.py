@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from components.water_surface import WaterState, WaterSurface
-from systems.water_surface.geometry import F64, I64, Bodies, Grid, bilinear
+from systems.water_surface.geometry import F64, I64, Bodies, Grid, bilinear, bilinear_fields, ranges
 from systems.water_surface.grid_source import column_depths
 from systems.water_surface.outline import (AddedPoints, Sections, added_points, coupling_pairs, cross_sections,
                                            nudge, outline_impulse, solid_vertices)
@@ -42,18 +42,31 @@ class StepReport:
 def plane_levels(z: F64, solid: np.ndarray, bodies: Bodies, grid: Grid) -> F64:
     """S'_z − y0 for each body: the mean height of the water vertices under its footprint (section 2.2.2); the
     vertices that were inside a body at the last step are not water and do not count (unless nothing else is
-    there: then they hold the last S')."""
-    centre = grid.to_uv(bodies.position[:, [0, 2]])
+    there: then they hold the last S'). A body whose footprint holds no vertex takes the height at its centre."""
+    centre = grid.to_uv(bodies.position[:, ::2])
     half = bodies.horizontal_half() / grid.h
     lo = np.maximum(np.ceil(centre - half), 0).astype(np.int64)
-    hi = np.minimum(np.floor(centre + half), [grid.nx - 1, grid.nz - 1]).astype(np.int64)
-    levels = bilinear(z, centre)
-    for b in range(len(bodies)):  # one slice mean per body
-        if lo[b, 0] <= hi[b, 0] and lo[b, 1] <= hi[b, 1]:
+    hi = np.minimum(np.floor(centre + half), (grid.nx - 1, grid.nz - 1)).astype(np.int64)
+    size = np.maximum(hi - lo + 1, 0)
+    if len(bodies) <= _LOOP_BODIES:  # a few bodies: one slice mean each
+        levels = bilinear(z, centre)
+        for b in np.flatnonzero(size.all(axis=1)):
             window = (slice(lo[b, 1], hi[b, 1] + 1), slice(lo[b, 0], hi[b, 0] + 1))
             water = ~solid[window]
             levels[b] = z[window][water].mean() if water.any() else z[window].mean()
-    return levels
+        return levels
+    count = size[:, 0] * size[:, 1]  # many: every window vertex at once, summed per body
+    body, offset = ranges(np.zeros(len(bodies), np.int64), count)
+    dv, du = np.divmod(offset, size[body, 0])
+    flat = (lo[body, 1] + dv) * grid.nx + lo[body, 0] + du
+    height, water = z.ravel()[flat], ~solid.ravel()[flat]
+    n_water = np.bincount(body, water, len(bodies))
+    wet = np.bincount(body, np.where(water, height, 0.0), len(bodies)) / np.maximum(n_water, 1)
+    every = np.bincount(body, height, len(bodies)) / np.maximum(count, 1)
+    return np.where(n_water > 0, wet, np.where(count > 0, every, bilinear(z, centre)))
+
+
+_LOOP_BODIES = 3
 
 
 def _scratch(state: WaterState) -> F64:
@@ -71,20 +84,34 @@ def _water_mean(field: F64, solid: I64 | None) -> float:
 
 
 def _near(bodies: Bodies, grid: Grid, state: WaterState, depth: float) -> np.ndarray:
-    centre = grid.to_uv(bodies.position[:, [0, 2]])
-    half = bodies.horizontal_half() / grid.h
-    over = np.all((centre + half >= 0.0) & (centre - half <= [grid.nx - 1, grid.nz - 1]), axis=1)
-    vertical = bodies.vertical_half()
-    top = float(np.max(state.heights)) + grid.y0
-    y = bodies.position[:, 1]
-    return over & (y - 2.0 * vertical <= top + 1e-9) & (y + vertical >= grid.y0 - depth)  # tracked a little early
+    """Bodies whose footprint overlaps the grid and whose vertical extent reaches the water (tracked a little
+    early: from two half heights above the highest wave)."""
+    extent = bodies.extent()
+    centre = grid.to_uv(bodies.position[:, ::2])
+    half = extent[:, ::2] / grid.h
+    over = ((centre + half >= 0.0) & (centre - half <= (grid.nx - 1, grid.nz - 1))).all(axis=1)
+    vertical, y = extent[:, 1], bodies.position[:, 1]
+    low = y - 2.0 * vertical
+    near = over & (y + vertical >= grid.y0 - depth)
+    # y − 2·half ≤ (max height) + y0: any one height bounds the maximum from below, so it settles most bodies
+    sure = low <= (float(state.heights.flat[0]) + grid.y0) + 1e-9
+    if not sure[near].all():
+        near &= low <= (float(np.max(state.heights)) + grid.y0) + 1e-9
+    return near
 
 
 def _previous(state: WaterState, bodies: Bodies, width: int) -> tuple[Sections, np.ndarray]:
     """Each body's cross-section at t − 1 (padded to ``width``) and whether it had one."""
+    known = state.body_entities
+    if (len(known) == len(bodies) and state.polygons.shape[1] == width and len(state.polygon_counts) == len(known)
+            and np.array_equal(known, bodies.entities)):  # the same bodies as last step: their sections as they are
+        sections = Sections(state.polygons, state.polygon_counts, state.polygon_counts, state.polygon_counts)
+        cached = state.section_edges
+        if cached is not None and cached[0] is state.polygons:
+            sections._edges = cached[1]
+        return sections, np.ones(len(bodies), bool)
     polygons = np.zeros((len(bodies), width, 2))
     counts = np.zeros(len(bodies), np.int64)
-    known = state.body_entities
     has = np.zeros(len(bodies), bool)
     if len(known) and len(bodies):
         sorter = np.argsort(known)
@@ -100,15 +127,17 @@ def _previous(state: WaterState, bodies: Bodies, width: int) -> tuple[Sections, 
 def _carried(state: WaterState, points: AddedPoints, z: F64, zp: F64) -> tuple[F64, F64]:
     """N_z(t), N_z(t − 1) of the added points: carried over by key from the last step, or lifted onto the
     surface (eq. 2.2–2.4) for points that are new."""
-    heights, previous = bilinear(z, points.uv), bilinear(zp, points.uv)
     known = state.point_keys
+    if len(known) == len(points) and len(state.point_heights) == len(known) and np.array_equal(known, points.keys):
+        return state.point_heights, state.point_previous  # the same points as last step (read only)
+    heights, previous = bilinear_fields((z, zp), points.uv)
     if len(known) and len(points):
         sorter = np.argsort(known)
         pos = np.minimum(np.searchsorted(known, points.keys, sorter=sorter), len(known) - 1)
         src = sorter[pos]
         same = known[src] == points.keys
-        heights[same] = state.point_heights[src[same]]
-        previous[same] = state.point_previous[src[same]]
+        heights = np.where(same, state.point_heights[src], heights)
+        previous = np.where(same, state.point_previous[src], previous)
     return heights, previous
 
 
@@ -170,6 +199,7 @@ def step_water(state: WaterState, cfg: WaterSurface, grid: Grid, bodies: Bodies,
     state.point_heights, state.point_previous, state.segments = new_points, previous_points, points.segments
     state.body_entities = bodies.entities.copy()
     state.polygons, state.polygon_counts = report.sections.polygons, report.sections.counts
+    state.section_edges = (report.sections.polygons, report.sections._edges)  # next step's D'(t − 1) edges
     state.last_raised = report.change
     report.points = points
     return report

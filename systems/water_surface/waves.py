@@ -22,11 +22,13 @@ mean water level so that the volume of water does not leak away.
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 from systems.water_surface.geometry import F64, I64, Grid, ranges
 
-__all__ = ["courant_k", "dents", "free_degree", "neighbour_sum", "propagate"]
+__all__ = ["courant_k", "dents", "free_degree", "neighbour_sum", "neighbour_table", "propagate"]
 
 
 def courant_k(wave_speed: float, spacing: float, dt: float) -> float:
@@ -53,6 +55,32 @@ def free_degree(nz: int, nx: int) -> F64:
     return neighbour_sum(np.ones((nz, nx)))
 
 
+@lru_cache(maxsize=16)
+def neighbour_table(nz: int, nx: int) -> I64:
+    """(nz·nx, 4) flat indices of each vertex's grid neighbours (+u, −u, +v, −v), −1 beyond the border."""
+    flat = np.arange(nz * nx).reshape(nz, nx)
+    table = -np.ones((nz, nx, 4), np.int64)
+    table[:, :-1, 0] = flat[:, 1:]
+    table[:, 1:, 1] = flat[:, :-1]
+    table[:-1, :, 2] = flat[1:, :]
+    table[1:, :, 3] = flat[:-1, :]
+    table = table.reshape(-1, 4)
+    table.setflags(write=False)
+    return table
+
+
+_DENSE_GRID = 1 << 14  # up to this many vertices, the touched vertices are gathered with dense counts
+
+
+def _gather_touched(index: I64, size: int, *values: F64) -> tuple:
+    """The distinct vertices in ``index`` and each of ``values`` summed per vertex."""
+    if size <= _DENSE_GRID:
+        touched = np.flatnonzero(np.bincount(index, minlength=size))
+        return (touched, *(np.bincount(index, v, size)[touched] for v in values))
+    touched, inverse = np.unique(index, return_inverse=True)
+    return (touched, *(np.bincount(inverse, v, len(touched)) for v in values))
+
+
 def propagate(z: F64, zp: F64, k: float, coefficient: F64, degree: F64, solid: I64 | None = None,
               pairs: tuple = (), points: F64 | None = None, points_prev: F64 | None = None,
               scratch: F64 | None = None, reuse: bool = False) -> tuple[F64, F64]:
@@ -69,11 +97,11 @@ def propagate(z: F64, zp: F64, k: float, coefficient: F64, degree: F64, solid: I
     zf, zpf = z.ravel(), zp.ravel()
     index, ds, dd = [], [], []
     if solid is not None and len(solid):  # neighbours lose the vertices inside bodies (reflection)
-        i = solid % nx
-        for offset, ok in ((1, i < nx - 1), (-1, i > 0), (nx, solid < (nz - 1) * nx), (-nx, solid >= nx)):
-            index.append(solid[ok] + offset)
-            ds.append(-zf[solid[ok]])
-            dd.append(np.full(int(ok.sum()), -1.0))
+        nb = neighbour_table(nz, nx)[solid]
+        real = nb >= 0
+        index.append(nb[real])
+        ds.append(-np.repeat(zf[solid], 4)[real.ravel()])
+        dd.append(-real[real].astype(np.float64))
     has_points = points is not None and len(points) > 0
     if has_points:
         g, p, w, n1, n2, w2 = pairs
@@ -83,10 +111,12 @@ def propagate(z: F64, zp: F64, k: float, coefficient: F64, degree: F64, solid: I
     s = neighbour_sum(z, scratch)
     special = None
     if index:  # eq. 2.11 at the vertices next to bodies or added points (computed before zp may be overwritten)
-        index = np.concatenate(index)
-        touched, inverse = np.unique(index, return_inverse=True)
-        s_t = s.ravel()[touched] + np.bincount(inverse, np.concatenate(ds), len(touched))
-        d_t = degree.ravel()[touched] + np.bincount(inverse, np.concatenate(dd), len(touched))
+        many = len(index) > 1
+        touched, s_extra, d_extra = _gather_touched(np.concatenate(index) if many else index[0], z.size,
+                                                    np.concatenate(ds) if many else ds[0],
+                                                    np.concatenate(dd) if many else dd[0])
+        s_t = s.ravel()[touched] + s_extra
+        d_t = degree.ravel()[touched] + d_extra
         lonely = d_t <= 1e-12
         k_t = np.minimum(k, 2.0 / np.where(lonely, 1.0, d_t))  # k·D ≤ 2: stable with the extra neighbours
         z_t = zf[touched]
