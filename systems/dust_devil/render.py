@@ -1,16 +1,23 @@
 """Dust devil rendering: particle-based volume rendering (PBVR, 2.3 of seeds/004) and the field markers (4).
 
-PBVR per view and dust devil, as passes of the render graph:
+PBVR per view and dust devil, as passes of the render graph.  Per repeat r = 0..R-1, K random pseudo-particles
+around every real particle are drawn as opaque points with the scene's depth test; each repeat is one opaque
+ensemble image (a pixel is covered or not, whatever number of pseudo-particles land on it), and the R images are
+averaged: colour = colour_sand * n / R + scene * (1 - n / R), n the number of repeats covering the pixel.
 
-1. ``dust_devil.{e}.pbvr_clear.{view}`` creates and clears the float accumulation target (rgba16f: repeat
-   counts are exact up to 2048) and a slab depth buffer;
-2. ``dust_devil.{e}.pbvr_accumulate.{view}``: R draws, r = 0..R-1, into the same target (one pass, so a
-   software rasteriser bins them together instead of flushing between repeats): K random pseudo-particles
-   around every real particle, drawn as opaque points with a depth test, *added* into the accumulation
-   target: rgb += colour, a += 1 once per covered pixel (see shaders/pbvr.vert for how the depth test makes
-   that "once per repeat");
-3. ``dust_devil.{e}.pbvr_resolve.{view}`` divides by R and composites over the view:
-   colour = sum / R + scene · (1 − coverage / R) — the average of the R ensemble images.
+Two implementations of the same ensemble (same hashed pseudo-particles, same coverage counts n):
+
+* **scatter** (GL 4.2 image load/store in the vertex stage; chosen when the context compiles it):
+  ``pbvr_clear`` zeroes a coverage image of one 32-bit word per pixel (two for R > 32);
+  ``pbvr_accumulate`` is one draw of N x (R x K) vertices with rasterisation off: each pseudo-particle tests the
+  pixels of its point against the view's depth and ORs bit r into their words (shaders/pbvr_scatter.vert);
+  ``pbvr_resolve`` counts the bits and composites over the view, inside the screen rectangle the particle cloud
+  can reach.  A software rasteriser spends most of a point's cost on setting up and shading its pixel block;
+  here a pseudo-particle costs one vertex-shader invocation.
+* **slab** (GL 3.3): ``pbvr_clear`` clears an rgba16f accumulation target and a depth buffer;
+  ``pbvr_accumulate`` draws the R repeats as points, repeat r at the depth of its own slab, additively blended
+  (rgb += colour, a += 1) with the depth test GL_LESS, which counts a pixel once per repeat;
+  ``pbvr_resolve`` divides by R and composites.
 
 R is ``repeats``, or ``drag_repeats`` while the field is being dragged.  With PBVR off the real particles are
 drawn as opaque points instead.  The markers (red spheres at the box's 8 corners and centre) are lit instanced
@@ -65,9 +72,41 @@ def extract_devils(world) -> list[DevilFrame]:
     return out
 
 
+GL_R32UI = 0x8236  # the coverage words: an r32f graph texture bound as an r32ui image (the same 32 bits)
+MAX_SCATTER_REPEATS = 64  # two coverage words per pixel
+
+
 def slab_depth(r: int, repeats: int) -> float:
     """NDC depth of repeat r's slab: strictly decreasing in r, so each repeat passes GL_LESS once per pixel."""
     return 1.0 - 2.0 * (r + 1) / (repeats + 1)
+
+
+def coverage_words(repeats: int) -> int:
+    """32-bit coverage words per pixel for R repeats (bit r of word r // 32)."""
+    return (repeats + 31) // 32
+
+
+def screen_rect(positions: np.ndarray, view_proj: np.ndarray, width: int, height: int, radius: float,
+                point_size: float) -> tuple[int, int, int, int] | None:
+    """Pixels (x, y, w, h) that pseudo-particles within ``radius`` of ``positions`` can cover: the projection of
+    the cloud's bounding box grown by ``radius`` (a convex set, so its image lies in the hull of the 8 corners'
+    images), grown by half a point and a pixel.  The whole view when a corner is behind the camera; None when
+    the box is off screen."""
+    if not len(positions):
+        return None
+    lo, hi = positions.min(axis=0) - radius, positions.max(axis=0) + radius
+    corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    clip = corners @ view_proj.astype(np.float64).T
+    if (clip[:, 3] <= 1e-6).any():
+        return 0, 0, width, height
+    ndc = clip[:, :2] / clip[:, 3:]
+    size = np.array([width, height], np.float64)
+    margin = 0.5 * point_size + 1.0
+    first = np.floor((ndc.min(axis=0) * 0.5 + 0.5) * size - margin).clip(0, size).astype(int)
+    last = np.ceil((ndc.max(axis=0) * 0.5 + 0.5) * size + margin).clip(0, size).astype(int)
+    if (last <= first).any():
+        return None
+    return int(first[0]), int(first[1]), int(last[0] - first[0]), int(last[1] - first[1])
 
 
 class DustDevilParticles(RenderFeature):
@@ -81,6 +120,8 @@ class DustDevilParticles(RenderFeature):
         self._buffers: dict[int, tuple[moderngl.Buffer, dict[str, moderngl.VertexArray]]] = {}
         self._uploaded: dict[int, int] = {}  # entity -> frame index of the last upload
         self.declared_repeats: dict[tuple[int, str], int] = {}  # (entity, view) -> R of the last declared frame
+        self.scatter: bool | None = None  # the GL 4.2 scatter path; None: probed at the first PBVR frame
+        self._resolve: dict[str, moderngl.VertexArray] = {}
 
     def extract(self, world) -> list[DevilFrame]:
         return extract_devils(world)
@@ -107,13 +148,37 @@ class DustDevilParticles(RenderFeature):
             vaos[program] = self.ctx.vertex_array(prog, [(buf, "3f", "in_position")])
         return vaos[program]
 
+    def _resolve_vao(self, fragment: str) -> moderngl.VertexArray:
+        """A full-screen triangle with ``shaders/<fragment>.frag``."""
+        vao = self._resolve.get(fragment)
+        if vao is None:
+            prog = self.renderer.program((ENGINE_SHADERS / "fullscreen.vert").read_text(),
+                                         (SHADERS / f"{fragment}.frag").read_text())
+            vao = self._resolve[fragment] = self.ctx.vertex_array(prog, [])
+        return vao
+
+    def use_scatter(self, repeats: int) -> bool:
+        """Whether R repeats take the scatter path: the context compiles its shaders (probed once) and R <= 64."""
+        if self.scatter is None:
+            self.scatter = False
+            if self.ctx.version_code >= 420:
+                try:
+                    self.renderer.load_program(SHADERS, "pbvr_scatter")
+                    self._resolve_vao("pbvr_coverage")
+                    self.scatter = True
+                except (RuntimeError, moderngl.Error):
+                    pass  # e.g. no image stores in the vertex stage: the slab path draws the same ensemble
+        return self.scatter and repeats <= MAX_SCATTER_REPEATS
+
     # ------------------------------------------------------------------------------ passes
     def add_passes(self, graph, view: View, data: list[DevilFrame]) -> None:
         for devil in data:
-            if devil.pbvr:
-                self._add_pbvr(graph, view, devil)
-            else:
+            if not devil.pbvr:
                 self._add_points(graph, view, devil)
+            elif self.use_scatter(devil.repeats):
+                self._add_scatter(graph, view, devil)
+            else:
+                self._add_slab(graph, view, devil)
 
     def _add_points(self, graph, view: View, devil: DevilFrame) -> None:
         def execute(pc):
@@ -129,7 +194,79 @@ class DustDevilParticles(RenderFeature):
 
         graph.add_pass(f"dust_devil.{devil.entity}.points.{view.name}", opaque_setup(view), execute)
 
-    def _add_pbvr(self, graph, view: View, devil: DevilFrame) -> None:
+    # ------------------------------------------------------------------------- scatter path
+    def _add_scatter(self, graph, view: View, devil: DevilFrame) -> None:
+        prefix = f"dust_devil.{devil.entity}"
+        words = coverage_words(devil.repeats)
+        rect = screen_rect(devil.positions, view.view_proj, view.width, view.height, devil.radius,
+                           devil.point_size)
+        h: dict[str, Any] = {}
+
+        def clear_setup(b):
+            h["cov"] = b.write(b.create(f"{prefix}.coverage.{view.name}",
+                                        TextureDesc(view.width, view.height * words, "r32f")))
+
+        def clear(pc):
+            fbo = self.renderer.framebuffer(pc.get(h["cov"]))
+            fbo.use()
+            fbo.clear(0.0, 0.0, 0.0, 0.0)  # +0.0: every bit zero
+
+        graph.add_pass(f"{prefix}.pbvr_clear.{view.name}", clear_setup, clear)
+        self.declared_repeats[(devil.entity, view.name)] = devil.repeats
+
+        def accumulate_setup(b):
+            b.read(view.depth)
+            h["cov"] = b.write(h["cov"])
+
+        def accumulate(pc):
+            if rect is None:
+                return
+            ctx = self.ctx
+            coverage = pc.get(h["cov"])
+            self.renderer.framebuffer(coverage).use()  # not the view's: its depth is sampled here
+            scene_depth = pc.get(view.depth)
+            compare = scene_depth.compare_func
+            scene_depth.compare_func = ""  # read raw depth values
+            scene_depth.use(0)
+            coverage.bind_to_image(0, read=True, write=True, format=GL_R32UI)
+            vao = self._vao(devil, "pbvr_scatter")
+            set_uniforms(vao.program, view_proj=view.view_proj.T.copy(), sub_particles=devil.sub_particles,
+                         frame_seed=int(self.renderer.frame_index % 2**31), radius=devil.radius,
+                         point_size=devil.point_size, view_size=(view.width, view.height), scene_depth=0)
+            ctx.enable(moderngl.RASTERIZER_DISCARD)
+            vao.render(moderngl.POINTS, vertices=len(devil.positions), instances=devil.repeats * devil.sub_particles)
+            ctx.disable(moderngl.RASTERIZER_DISCARD)
+            ctx.memory_barrier()  # the resolve reads the words through image loads
+            scene_depth.compare_func = compare
+
+        graph.add_pass(f"{prefix}.pbvr_accumulate.{view.name}", accumulate_setup, accumulate)
+
+        def resolve_setup(b):
+            b.read(h["cov"])
+            view.color = b.write(view.color)
+
+        def resolve(pc):
+            if rect is None:
+                return
+            fbo = self.renderer.framebuffer(pc.get(view.color))
+            fbo.use()
+            fbo.scissor = rect  # the pixels the cloud can reach; the rest keeps the scene
+            ctx = self.ctx
+            ctx.disable(moderngl.DEPTH_TEST)
+            ctx.enable(moderngl.BLEND)
+            ctx.blend_func = moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA
+            pc.get(h["cov"]).bind_to_image(0, read=True, write=False, format=GL_R32UI)
+            vao = self._resolve_vao("pbvr_coverage")
+            set_uniforms(vao.program, view_height=view.height, words=words, color=devil.color,
+                         inv_repeats=1.0 / devil.repeats)
+            vao.render(moderngl.TRIANGLES, vertices=3)
+            ctx.disable(moderngl.BLEND)
+            fbo.scissor = None
+
+        graph.add_pass(f"{prefix}.pbvr_resolve.{view.name}", resolve_setup, resolve)
+
+    # ---------------------------------------------------------------------------- slab path
+    def _add_slab(self, graph, view: View, devil: DevilFrame) -> None:
         prefix = f"dust_devil.{devil.entity}"
         h: dict[str, Any] = {}
 
@@ -146,25 +283,35 @@ class DustDevilParticles(RenderFeature):
 
         graph.add_pass(f"{prefix}.pbvr_clear.{view.name}", clear_setup, clear)
         self.declared_repeats[(devil.entity, view.name)] = devil.repeats
-        graph.add_pass(f"{prefix}.pbvr_accumulate.{view.name}", self._repeat_setup(view, h),
-                       self._repeat_execute(view, devil, h))
+
+        def accumulate_setup(b):
+            b.read(view.depth)
+            h["acc"] = b.write(h["acc"])
+            h["slab"] = b.write(h["slab"])
+
+        graph.add_pass(f"{prefix}.pbvr_accumulate.{view.name}", accumulate_setup,
+                       self._slab_execute(view, devil, h))
 
         def resolve_setup(b):
             b.read(h["acc"])
             view.color = b.write(view.color)
 
-        graph.add_pass(f"{prefix}.pbvr_resolve.{view.name}", resolve_setup, self._resolve_execute(view, devil, h))
+        def resolve(pc):
+            fbo = self.renderer.framebuffer(pc.get(view.color))
+            fbo.use()
+            ctx = self.ctx
+            ctx.disable(moderngl.DEPTH_TEST)
+            ctx.enable(moderngl.BLEND)
+            ctx.blend_func = moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA
+            vao = self._resolve_vao("resolve")
+            pc.get(h["acc"]).use(0)
+            set_uniforms(vao.program, accumulation=0, inv_repeats=1.0 / devil.repeats)
+            vao.render(moderngl.TRIANGLES, vertices=3)
+            ctx.disable(moderngl.BLEND)
 
-    @staticmethod
-    def _repeat_setup(view: View, h: dict):
-        def setup(b):
-            b.read(view.depth)
-            h["acc"] = b.write(h["acc"])
-            h["slab"] = b.write(h["slab"])
+        graph.add_pass(f"{prefix}.pbvr_resolve.{view.name}", resolve_setup, resolve)
 
-        return setup
-
-    def _repeat_execute(self, view: View, devil: DevilFrame, h: dict):
+    def _slab_execute(self, view: View, devil: DevilFrame, h: dict):
         def execute(pc):
             fbo = self.renderer.framebuffer(pc.get(h["acc"]), pc.get(h["slab"]))
             fbo.use()
@@ -188,39 +335,16 @@ class DustDevilParticles(RenderFeature):
 
         return execute
 
-    def _resolve_execute(self, view: View, devil: DevilFrame, h: dict):
-        def execute(pc):
-            fbo = self.renderer.framebuffer(pc.get(view.color))
-            fbo.use()
-            ctx = self.ctx
-            ctx.disable(moderngl.DEPTH_TEST)
-            ctx.enable(moderngl.BLEND)
-            ctx.blend_func = moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA
-            vao = self._resolve_vao()
-            pc.get(h["acc"]).use(0)
-            set_uniforms(vao.program, accumulation=0, inv_repeats=1.0 / devil.repeats)
-            vao.render(moderngl.TRIANGLES, vertices=3)
-            ctx.disable(moderngl.BLEND)
-
-        return execute
-
-    def _resolve_vao(self) -> moderngl.VertexArray:
-        vao = getattr(self, "_resolve", None)
-        if vao is None:
-            prog = self.renderer.program((ENGINE_SHADERS / "fullscreen.vert").read_text(),
-                                         (SHADERS / "resolve.frag").read_text())
-            vao = self._resolve = self.ctx.vertex_array(prog, [])
-        return vao
-
     def release(self) -> None:
         for buf, vaos in self._buffers.values():
             for vao in vaos.values():
                 vao.release()
             buf.release()
         self._buffers.clear()
-        if getattr(self, "_resolve", None) is not None:
-            self._resolve.release()
-            self._resolve = None
+        self._uploaded.clear()
+        for vao in self._resolve.values():
+            vao.release()
+        self._resolve.clear()
 
 
 class DustDevilMarkers(RenderFeature):

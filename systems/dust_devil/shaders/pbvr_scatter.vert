@@ -1,0 +1,41 @@
+#version 420
+// PBVR ensemble, scatter form (2.3, seeds/004); needs GL 4.2 image load/store in the vertex stage.
+// One invocation = one pseudo-particle: real particle gl_VertexID, sample gl_InstanceID = r * K + k of the R x K
+// this frame draws.  Nothing is rasterised (GL_RASTERIZER_DISCARD): the shader projects the pseudo-particle, tests
+// every pixel its opaque square point of `point_size` pixels covers against the scene's depth, and sets bit r of
+// that pixel's coverage word.  A pixel thus counts each repeat at most once, however many of the repeat's
+// pseudo-particles land on it: the R ensemble images, each opaque, kept as R bits per pixel.
+uniform mat4 view_proj;
+uniform int sub_particles;   // K
+uniform int frame_seed;      // changes every frame: a new ensemble
+uniform float radius;        // metres: pseudo-particles are uniform in a ball of this radius
+uniform float point_size;    // pixels
+uniform ivec2 view_size;     // pixels; repeats 32..63 use the rows view_size.y.. of the coverage image
+uniform sampler2D scene_depth;
+layout(r32ui, binding = 0) uniform coherent uimage2D coverage;
+in vec3 in_position;         // the real particle, world space
+
+#include "pbvr_sample.glsl"
+
+void main() {
+    gl_Position = vec4(0.0, 0.0, 0.0, 1.0);  // never rasterised
+    int sample_id = gl_InstanceID;
+    vec4 clip = view_proj * vec4(in_position + sub_particle_offset(gl_VertexID, sample_id, frame_seed, radius), 1.0);
+    float ndc_z = clip.z / clip.w;
+    if (clip.w <= 0.0 || ndc_z < -1.0 || ndc_z > 1.0) return;  // outside the near/far range: clipped away
+    float depth = 0.5 * ndc_z + 0.5;
+    vec2 window = (clip.xy / clip.w * 0.5 + 0.5) * vec2(view_size);
+    // pixels whose centres lie in the point's square [window - size/2, window + size/2)
+    ivec2 lo = max(ivec2(floor(window - 0.5 * point_size + 0.5)), ivec2(0));
+    ivec2 hi = min(ivec2(floor(window + 0.5 * point_size + 0.5)), view_size);
+    int repeat_index = sample_id / sub_particles;
+    uint bit = 1u << uint(repeat_index & 31);
+    int row = (repeat_index >> 5) * view_size.y;
+    for (int y = lo.y; y < hi.y; ++y) {
+        for (int x = lo.x; x < hi.x; ++x) {
+            if (depth <= texelFetch(scene_depth, ivec2(x, y), 0).r) {  // opaque scene in front hides it
+                imageAtomicOr(coverage, ivec2(x, y + row), bit);
+            }
+        }
+    }
+}
