@@ -26,6 +26,7 @@ spheres drawn with the engine's mesh shader.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -38,6 +39,7 @@ from engine.render.feature import OPAQUE, TRANSPARENT, RenderFeature, View
 from engine.render.graph import TextureDesc
 from engine.render.passes import SHADERS as ENGINE_SHADERS
 from engine.render.passes import lighting_uniforms, opaque_setup, primitive, set_uniforms
+from engine.render.renderer import shader_source
 from engine.spatial import Transform
 from systems.dust_devil.simulate import marker_points, world_positions
 
@@ -127,8 +129,9 @@ class DustDevilParticles(RenderFeature):
         return extract_devils(world)
 
     # -------------------------------------------------------------------------- GL objects
-    def _vao(self, devil: DevilFrame, program: str) -> moderngl.VertexArray:
-        """The VAO of ``program`` over the devil's particle buffer, uploaded once per frame."""
+    def _vao(self, devil: DevilFrame, program: str, defines: str = "") -> moderngl.VertexArray:
+        """The VAO of ``shaders/<program>`` (``defines`` put after its #version line) over the devil's particle
+        buffer, uploaded once per frame."""
         nbytes = max(devil.positions.nbytes, 12)
         buf, vaos = self._buffers.get(devil.entity, (None, {}))
         if buf is None or buf.size < nbytes:
@@ -143,10 +146,21 @@ class DustDevilParticles(RenderFeature):
         if self._uploaded.get(devil.entity) != frame:
             buf.write(devil.positions.tobytes())
             self._uploaded[devil.entity] = frame
-        if program not in vaos:
-            prog = self.renderer.load_program(SHADERS, program)
-            vaos[program] = self.ctx.vertex_array(prog, [(buf, "3f", "in_position")])
-        return vaos[program]
+        key = program + defines
+        if key not in vaos:
+            prog = self._program(program, defines)
+            vaos[key] = self.ctx.vertex_array(prog, [(buf, "3f", "in_position")])
+        return vaos[key]
+
+    def _program(self, name: str, defines: str = "") -> moderngl.Program:
+        """``shaders/<name>.vert`` + ``.frag`` with ``defines`` after the vertex shader's #version line."""
+        if not defines:
+            return self.renderer.load_program(SHADERS, name)
+        version, rest = shader_source(SHADERS / f"{name}.vert").split("\n", 1)
+        try:
+            return self.renderer.program(f"{version}\n{defines}\n{rest}", shader_source(SHADERS / f"{name}.frag"))
+        except moderngl.Error as exc:
+            raise RuntimeError(f"shader '{name}' ({defines}) in {SHADERS} failed to compile:\n{exc}") from None
 
     def _resolve_vao(self, fragment: str) -> moderngl.VertexArray:
         """A full-screen triangle with ``shaders/<fragment>.frag``."""
@@ -207,9 +221,12 @@ class DustDevilParticles(RenderFeature):
                                         TextureDesc(view.width, view.height * words, "r32f")))
 
         def clear(pc):
+            if rect is None:
+                return
             fbo = self.renderer.framebuffer(pc.get(h["cov"]))
             fbo.use()
-            fbo.clear(0.0, 0.0, 0.0, 0.0)  # +0.0: every bit zero
+            # +0.0: every bit zero; only where pseudo-particles can land and the resolve reads (one word: the rect)
+            fbo.clear(0.0, 0.0, 0.0, 0.0, viewport=rect if words == 1 else None)
 
         graph.add_pass(f"{prefix}.pbvr_clear.{view.name}", clear_setup, clear)
         self.declared_repeats[(devil.entity, view.name)] = devil.repeats
@@ -229,7 +246,7 @@ class DustDevilParticles(RenderFeature):
             scene_depth.compare_func = ""  # read raw depth values
             scene_depth.use(0)
             coverage.bind_to_image(0, read=True, write=True, format=GL_R32UI)
-            vao = self._vao(devil, "pbvr_scatter")
+            vao = self._vao(devil, "pbvr_scatter", f"#define POINT_SIDE {math.ceil(devil.point_size)}")
             set_uniforms(vao.program, view_proj=view.view_proj.T.copy(), sub_particles=devil.sub_particles,
                          frame_seed=int(self.renderer.frame_index % 2**31), radius=devil.radius,
                          point_size=devil.point_size, view_size=(view.width, view.height), scene_depth=0)

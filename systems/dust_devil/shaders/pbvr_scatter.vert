@@ -14,6 +14,9 @@ uniform ivec2 view_size;     // pixels; repeats 32..63 use the rows view_size.y.
 uniform sampler2D scene_depth;
 layout(r32ui, binding = 0) uniform coherent uimage2D coverage;
 in vec3 in_position;         // the real particle, world space
+#ifndef POINT_SIDE
+#define POINT_SIDE 1         // ceil(point_size): render.py compiles one variant per side
+#endif
 
 #include "pbvr_sample.glsl"
 
@@ -25,16 +28,19 @@ void main() {
     if (clip.w <= 0.0 || ndc_z < -1.0 || ndc_z > 1.0) return;  // outside the near/far range: clipped away
     float depth = 0.5 * ndc_z + 0.5;
     vec2 window = (clip.xy / clip.w * 0.5 + 0.5) * vec2(view_size);
-    // pixels whose centres lie in the point's square [window - size/2, window + size/2)
-    ivec2 lo = max(ivec2(floor(window - 0.5 * point_size + 0.5)), ivec2(0));
-    ivec2 hi = min(ivec2(floor(window + 0.5 * point_size + 0.5)), view_size);
+    // pixels whose centres lie in the point's square [window - size/2, window + size/2): [first, last), at most
+    // POINT_SIDE = ceil(point_size) per axis (a constant, so the loops unroll)
+    ivec2 first = ivec2(floor(window - 0.5 * point_size + 0.5));
+    ivec2 last = min(ivec2(floor(window + 0.5 * point_size + 0.5)), view_size);
     int repeat_index = sample_id / sub_particles;
     uint bit = 1u << uint(repeat_index & 31);
     int row = (repeat_index >> 5) * view_size.y;
-    for (int y = lo.y; y < hi.y; ++y) {
-        for (int x = lo.x; x < hi.x; ++x) {
-            if (depth <= texelFetch(scene_depth, ivec2(x, y), 0).r) {  // opaque scene in front hides it
-                imageAtomicOr(coverage, ivec2(x, y + row), bit);
+    for (int dy = 0; dy < POINT_SIDE; ++dy) {
+        for (int dx = 0; dx < POINT_SIDE; ++dx) {
+            ivec2 q = first + ivec2(dx, dy);
+            if (all(lessThan(q, last)) && all(greaterThanEqual(q, ivec2(0)))
+                    && depth <= texelFetch(scene_depth, q, 0).r) {  // opaque scene in front hides it
+                imageAtomicOr(coverage, ivec2(q.x, q.y + row), bit);
             }
         }
     }

@@ -50,23 +50,25 @@ def reference_counts(positions, view_proj, scene_depth, repeats, sub_particles, 
     inside = (clip[:, 3] > 0) & (np.abs(ndc[:, 2]) <= 1.0)
     window = (ndc[:, :2] * 0.5 + 0.5) * [WIDTH, HEIGHT]
     depth = 0.5 * ndc[:, 2] + 0.5
+    # pixels whose centres lie in the point's square [window - size/2, window + size/2)
     first = np.floor(window - 0.5 * point_size + 0.5).astype(int)
+    last = np.floor(window + 0.5 * point_size + 0.5).astype(int)
     covered = np.zeros((repeats, HEIGHT, WIDTH), bool)
-    side = int(round(point_size))
+    side = int(np.ceil(point_size))
     for dy in range(side):
         for dx in range(side):
             x, y = first[:, 0] + dx, first[:, 1] + dy
-            ok = inside & (x >= 0) & (x < WIDTH) & (y >= 0) & (y < HEIGHT)
+            ok = inside & (x < last[:, 0]) & (y < last[:, 1]) & (x >= 0) & (x < WIDTH) & (y >= 0) & (y < HEIGHT)
             ok[ok] &= depth[ok] <= scene_depth[y[ok], x[ok]]
             covered[(sample // sub_particles)[ok], y[ok], x[ok]] = True
     return covered.sum(axis=0)
 
 
-def rendered_counts(tmp_path, scatter: bool, repeats: int, name: str):
+def rendered_counts(tmp_path, scatter: bool, repeats: int, name: str, point_size: float = 2.0):
     """(counts per pixel, reference counts, R) of one frame drawn by the chosen PBVR path."""
     path = tmp_path / f"{name}.toml"
     path.write_text(scene_text(amplitude=4.0, position=(0.0, -2.0, 0.0), particle_count=400, prewarm_time=2.0,
-                               repeats=repeats, drag_repeats=1, show_markers=False, point_size=2.0,
+                               repeats=repeats, drag_repeats=1, show_markers=False, point_size=point_size,
                                sub_particle_radius=0.8, grid_resolution=[16, 16, 16])
                     + camera(target_y=4.0, distance=18.0, pitch=-10.0), encoding="utf-8")
     app = App(path, strict=True, configs_root=ROOT / "configs")
@@ -108,9 +110,10 @@ def rendered_counts(tmp_path, scatter: bool, repeats: int, name: str):
     return out["counts"], ref
 
 
-@pytest.mark.parametrize("scatter, repeats", [(True, 8), (True, 40), (False, 8)])
-def test_each_repeat_counts_once_per_pixel_as_the_reference(tmp_path, gl_ctx, scatter, repeats):
-    counts, ref = rendered_counts(tmp_path, scatter, repeats, f"s{int(scatter)}r{repeats}")
+@pytest.mark.parametrize("scatter, repeats, point_size", [(True, 8, 2.0), (True, 40, 1.0), (True, 6, 2.5),
+                                                         (False, 8, 2.0)])
+def test_each_repeat_counts_once_per_pixel_as_the_reference(tmp_path, gl_ctx, scatter, repeats, point_size):
+    counts, ref = rendered_counts(tmp_path, scatter, repeats, f"s{int(scatter)}r{repeats}", point_size)
     covered = ref > 0
     assert covered.sum() > 300 and ref.max() == repeats  # the dense core is covered by every repeat
     assert 0 < (ref < counts.max() - 1).sum()  # partly hidden by the terrain or sparse: not all pixels saturate
