@@ -88,8 +88,9 @@ class Edges:
         outline counts too). Polygons with fewer than 3 vertices contain nothing."""
         if len(points) == 0:
             return np.zeros(0, bool)
-        d = self.n[body] * points[:, None, :]
-        return ((d[..., 0] + d[..., 1] - self.c[body]) > margin).all(axis=1) & self.valid[body, 2]
+        d = _per_point(self.n, body) * points[:, None, :]
+        inside = ((d[..., 0] + d[..., 1] - _per_point(self.c, body)) > margin).all(axis=1)
+        return inside & self.valid[body, 2]
 
 
 _FLIP = np.array([-1.0, 1.0])
@@ -156,26 +157,26 @@ def _box_edge_faces(feature: I64, counts: I64) -> I64:
 
 def _box_sections(bodies: Bodies, plane_y: F64, grid: Grid) -> tuple[F64, I64, I64]:
     local = _SIGNS * bodies.half[:, None, :]
-    corners = bodies.position[:, None, :] + np.einsum("bij,bcj->bci", bodies.rotation, local)
-    y = corners[..., 1] - plane_y[:, None]
+    corners = local @ bodies.rotation.transpose(0, 2, 1) + bodies.position[:, None, :]  # (B, 8, 3) world
+    ends = corners[:, _EDGES]  # (B, 12, 2, 3): the two corners Q, R of every edge
+    y = ends[..., 1] - plane_y[:, None, None]
     above = y >= 0.0
-    ya, yb = y[:, _EA], y[:, _EB]
-    straddle = above[:, _EA] != above[:, _EB]
-    t = ya / np.where(straddle, ya - yb, 1.0)
-    qa = corners[:, _EA][..., [0, 2]]
-    qr = corners[:, _EB][..., [0, 2]]
-    points = grid.to_uv(qa + t[..., None] * (qr - qa))
-    return _sort_ccw(points, straddle, exact=bool(np.any(y == 0.0)))
+    straddle = above[..., 0] != above[..., 1]
+    ya = y[..., 0]
+    t = ya / np.where(straddle, ya - y[..., 1], 1.0)  # L = Q + t·(R − Q) on the plane
+    q, r = ends[:, :, 0, ::2], ends[:, :, 1, ::2]
+    points = grid.to_uv(q + t[..., None] * (r - q))
+    return _sort_ccw(points, straddle, exact=bool((y == 0.0).any()))
 
 
 def _sort_ccw(points: F64, valid: np.ndarray, exact: bool) -> tuple[F64, I64, I64]:
     """The valid points of each row counter-clockwise about their centroid (first 6 columns), their count and
     the column each came from; with ``exact`` (a box corner on the plane) repeated points are dropped."""
     n = valid.sum(axis=1)
-    centre = np.sum(np.where(valid[..., None], points, 0.0), axis=1) / np.maximum(n, 1)[:, None]
+    centre = np.where(valid[..., None], points, 0.0).sum(axis=1) / np.maximum(n, 1)[:, None]
     d = points - centre[:, None, :]
     angle = np.where(valid, np.arctan2(d[..., 1], d[..., 0]), np.inf)
-    order = np.argsort(angle, axis=1, kind="stable")[:, :_MAX_BOX_VERTICES]
+    order = angle.argsort(axis=1, kind="stable")[:, :_MAX_BOX_VERTICES]
     rows = np.arange(len(points))[:, None]
     polygons = points[rows, order]
     if exact:  # a box vertex on the plane gives the same L' from several edges: keep one
@@ -239,7 +240,10 @@ class AddedPoints:
 def added_points(sections: Sections, entities: I64, grid: Grid) -> tuple[AddedPoints, Sections]:
     """The vertices L' and grid-edge crossings M' of every cross-section, ordered along the outline; points off
     the grid's footprint and the segments touching them are dropped. Returns the points and the sections they
-    were cut from (shrunk a hair in the rare case where an edge of D' passes exactly through a grid vertex)."""
+    were cut from (shrunk a hair in the rare case where an edge of D' passes exactly through a grid vertex).
+
+    A point's key (its identity from step to step) is (entity, crossing or vertex, box edge / face or sphere
+    vertex / edge, which family of grid lines, grid line), packed in an int64."""
     points = None
     for attempt in range(4):
         points = _outline(sections, strict=attempt < 3)
@@ -247,25 +251,27 @@ def added_points(sections: Sections, entities: I64, grid: Grid) -> tuple[AddedPo
             break
         centre = sections.centres()[:, None, :]
         sections = sections.with_polygons(centre + (sections.polygons - centre) * (1.0 - 1e-6 * (attempt + 1)))
-    uv, kind, feature, line, body, sort_key = points
+    uv, kind, keys, body, sort_key = points
     n = len(uv)
     if n == 0:
         return AddedPoints.empty(), sections
-    order = np.argsort(sort_key, kind="stable")
-    uv, kind, feature, line, body = uv[order], kind[order], feature[order], line[order], body[order]
-    change = np.empty(n + 1, bool)
-    change[0] = change[n] = True
-    np.not_equal(body[1:], body[:-1], out=change[1:n])
-    starts = np.flatnonzero(change[:n])
+    order = sort_key.argsort(kind="stable")
+    uv, kind, body = uv[order], kind[order], body[order]
+    keys = (entities[body].astype(np.int64) << 32) | keys[order]
     nxt = np.arange(1, n + 1)
-    last = change[1:]
-    nxt[last] = starts
-    keep = grid.inside(uv)
-    crossing = (kind < 2).astype(np.int64)
-    keys = ((entities[body].astype(np.int64) << 32) | (crossing << 30) | (feature.astype(np.int64) << 22)
-            | ((kind == 1).astype(np.int64) << 21) | (crossing * line))
+    if body[0] == body[-1]:  # one outline: it closes on its first point
+        nxt[-1] = 0
+    else:
+        change = np.empty(n + 1, bool)
+        change[0] = change[n] = True
+        np.not_equal(body[1:], body[:-1], out=change[1:n])
+        last = change[1:]
+        nxt[last] = np.flatnonzero(change[:n])
+    keep = ((uv >= 0.0) & (uv <= (grid.nx - 1, grid.nz - 1))).all(axis=1)  # on the grid's footprint
     if keep.all():
-        segments = np.stack([np.arange(n), nxt], axis=-1)
+        segments = np.empty((n, 2), np.int64)
+        segments[:, 0] = np.arange(n)
+        segments[:, 1] = nxt
         return AddedPoints(uv, kind, keys, body, segments), sections
     remap = np.cumsum(keep) - 1
     seg_ok = keep & keep[nxt]
@@ -273,12 +279,15 @@ def added_points(sections: Sections, entities: I64, grid: Grid) -> tuple[AddedPo
     return AddedPoints(uv[keep], kind[keep], keys[keep], body[keep], segments), sections
 
 
+_CROSSING_KEY = 1 << 30
+
+
 def _outline(sections: Sections, strict: bool):
-    """Vertices and crossings (unsorted) with a sort key ordering them along the outline (body, edge, t);
-    None if, with ``strict``, an edge crosses a grid vertex. Both families of grid lines (u = i: axis 0, v = j:
-    axis 1) are handled in one pass over the (edge, axis) pairs."""
+    """Vertices and crossings (unsorted): (uv, kind, key without the entity, body, sort key ordering them along
+    the outline: body, edge, t); None if, with ``strict``, an edge crosses a grid vertex. Both families of grid
+    lines (u = i: axis 0, v = j: axis 1) are handled in one pass over the (edge, axis) pairs."""
     e = sections.edges
-    eb, ek = np.nonzero(e.valid)
+    eb, ek = e.valid.nonzero()
     a, d = e.start[eb, ek], e.e[eb, ek]  # (E, 2)
     base = (eb * sections.polygons.shape[1] + ek).astype(np.float64) * 2.0  # edge index; t ∈ (0, 1) after it
     b = a + d
@@ -289,20 +298,21 @@ def _outline(sections: Sections, strict: bool):
     af, df = a.ravel(), d.ravel()
     t = (line - af[run]) / df[run]
     other = af[run ^ 1] + t * df[run ^ 1]
-    if strict and np.any((np.abs(other - np.rint(other)) < EPS_LINE) & (axis == 0)):
+    if strict and ((np.abs(other - np.rint(other)) < EPS_LINE) & (axis == 0)).any():
         return None
     on_u = axis == 0
-    point = np.empty((len(run), 2))
-    point[:, 0] = np.where(on_u, line, other)
-    point[:, 1] = np.where(on_u, other, line)
-    n = len(eb)
-    kind = np.empty(n + len(run), np.int8)
+    n, m = len(eb), len(run)
+    uv = np.empty((n + m, 2))
+    uv[:n] = a
+    uv[n:, 0] = np.where(on_u, line, other)
+    uv[n:, 1] = np.where(on_u, other, line)
+    kind = np.empty(n + m, np.int8)
     kind[:n] = 2
     kind[n:] = axis
-    return (np.concatenate([a, point]), kind,
-            np.concatenate([sections.vertex_feature[eb, ek], sections.edge_feature[eb, ek][edge]]),
-            np.concatenate([np.zeros(n, np.int64), line]), np.concatenate([eb, eb[edge]]),
-            np.concatenate([base, base[edge] + t]))
+    keys = np.empty(n + m, np.int64)
+    keys[:n] = sections.vertex_feature[eb, ek] << 22
+    keys[n:] = (sections.edge_feature[eb, ek][edge] << 22) | (axis << 21) | line | _CROSSING_KEY
+    return uv, kind, keys, np.concatenate([eb, eb[edge]]), np.concatenate([base, base[edge] + t])
 
 
 # ---------------------------------------------------------------------------------------- wave generation
@@ -323,27 +333,39 @@ def outline_impulse(points: AddedPoints, sections: Sections, previous: Sections,
         empty = np.zeros(0)
         return empty, empty, np.zeros(0, bool), np.zeros(0, bool)
     bi = points.body
-    old = has_previous[bi] & (previous.counts[bi] >= 3)
-    back = np.where(old[:, None], nearest_on_outline(points.uv, bi, previous.edges), points.uv)
-    d = np.hypot(points.uv[:, 0] - back[:, 0], points.uv[:, 1] - back[:, 1]) * grid.h  # eq. 2.5
-    raised = old & sections.edges.inside(back, bi, -_ON_OUTLINE)  # N_c(t − 1) inside D'(t)
-    lowered = old & previous.edges.inside(points.uv, bi, -_ON_OUTLINE)  # N_c(t) inside D'(t − 1)
-    change = alpha * d * (raised.astype(np.float64) - lowered.astype(np.float64))  # eq. 2.6 / 2.7
+    old = (has_previous & (previous.counts >= 3))[bi]
+    every = bool(old.all())
+    back = nearest_on_outline(points.uv, bi, previous.edges)
+    if not every:
+        back = np.where(old[:, None], back, points.uv)
+    gap = points.uv - back
+    d = np.hypot(gap[:, 0], gap[:, 1]) * grid.h  # eq. 2.5
+    raised = sections.edges.inside(back, bi, -_ON_OUTLINE)  # N_c(t − 1) inside D'(t)
+    lowered = previous.edges.inside(points.uv, bi, -_ON_OUTLINE)  # N_c(t) inside D'(t − 1)
+    if not every:
+        raised &= old
+        lowered &= old
+    change = alpha * d * np.subtract(raised, lowered, dtype=np.float64)  # eq. 2.6 / 2.7
     nb = len(has_previous)
     mean = np.bincount(bi, change, nb) / np.maximum(np.bincount(bi, minlength=nb), 1)
     return change - mean[bi], d, raised, lowered
 
 
+def _per_point(values: np.ndarray, body: I64) -> np.ndarray:
+    """``values[body]``, or ``values`` itself when there is one body (it broadcasts: no copy)."""
+    return values if len(values) == 1 else values[body]
+
+
 def nearest_on_outline(points: F64, body: I64, edges: Edges) -> F64:
     """The point of polygon ``body[p]``'s outline nearest to ``points[p]``."""
-    a, e = edges.start[body], edges.e[body]  # (P, V, 2)
+    a, e = _per_point(edges.start, body), _per_point(edges.e, body)  # (P, V, 2)
     r = points[:, None, :] - a
     re = r * e
-    t = np.minimum(np.maximum((re[..., 0] + re[..., 1]) / edges.length2[body], 0.0), 1.0)
+    t = np.minimum(np.maximum((re[..., 0] + re[..., 1]) / _per_point(edges.length2, body), 0.0), 1.0)
     foot = a + t[..., None] * e
     gap = foot - points[:, None, :]
     gap *= gap
-    dist2 = np.where(edges.valid[body], gap[..., 0] + gap[..., 1], np.inf)
+    dist2 = np.where(_per_point(edges.valid, body), gap[..., 0] + gap[..., 1], np.inf)
     return foot[np.arange(len(points)), np.argmin(dist2, axis=1)]
 
 
@@ -364,12 +386,12 @@ def solid_vertices(sections: Sections, grid: Grid) -> tuple[I64, I64]:
     body, row = ranges(lo, np.maximum(hi - lo + 1, 0))
     if len(body) == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    a, d = e.start[body], e.e[body]  # (R, V, 2)
+    a, d = _per_point(e.start, body), _per_point(e.e, body)  # (R, V, 2)
     ay, ey = a[..., 1], d[..., 1]
     flat = ey != 0.0
     t = (row[:, None] - ay) / np.where(flat, ey, np.inf)
     u = a[..., 0] + t * d[..., 0]
-    crosses = e.valid[body] & (t >= 0.0) & (t < 1.0) & flat
+    crosses = (t >= 0.0) & (t < 1.0) & (flat & _per_point(e.valid, body))
     left = np.where(crosses, u, np.inf).min(axis=1)
     right = np.where(crosses, u, -np.inf).max(axis=1)
     ok = (left < np.inf) & (right > -np.inf)
@@ -383,8 +405,11 @@ _CORNER_OFFSETS = np.array([[0, 0], [1, 0], [0, 1], [1, 1]])  # (i, j) offsets o
 _DENSE_PAIRS = 96  # up to this many added points, their pairs come from the full distance matrix
 
 
-def coupling_pairs(points: AddedPoints, fluid: np.ndarray, grid: Grid) -> tuple[I64, I64, F64, I64, I64, F64]:
+def coupling_pairs(points: AddedPoints, fluid: np.ndarray, grid: Grid,
+                   solid_mask: bool = False) -> tuple[I64, I64, F64, I64, I64, F64]:
     """Neighbours within radius h for eq. 2.11 / 2.12, with weights r_k / h = 1 − distance / h.
+
+    ``fluid`` marks the water vertices (with ``solid_mask``, it marks the vertices inside bodies instead).
 
     Returns (grid vertex, added point, weight) for the pairs between the grid and the added points (vertices
     inside a body excluded), and (point, point, weight) for the pairs of added points, both directions. A grid
@@ -404,7 +429,10 @@ def coupling_pairs(points: AddedPoints, fluid: np.ndarray, grid: Grid) -> tuple[
     dist = np.hypot(gap[..., 0], gap[..., 1])
     ok = (dist < 1.0) & (corner[..., 0] < grid.nx) & (corner[..., 1] < grid.nz)  # points lie on the footprint
     flat = np.where(ok, corner[..., 1] * grid.nx + corner[..., 0], 0)
-    ok &= fluid.ravel()[flat]
+    if solid_mask:
+        ok &= ~fluid.ravel()[flat]
+    else:
+        ok &= fluid.ravel()[flat]
     p_idx, c_idx = np.nonzero(ok)
     g = flat[p_idx, c_idx]
     w = 1.0 - dist[p_idx, c_idx]

@@ -83,6 +83,16 @@ def _water_mean(field: F64, solid: I64 | None) -> float:
     return float((field.sum() - field.ravel()[solid].sum()) / (field.size - len(solid)))
 
 
+def _solid_index(state: WaterState) -> I64 | None:
+    """Flat indices of the vertices inside bodies (``state.solid``), None when there are none."""
+    cached = state.solid_index
+    if cached is not None and cached[0] is state.solid:
+        index = cached[1]
+    else:
+        index = state.solid.ravel().nonzero()[0]
+    return index if len(index) else None
+
+
 def _near(bodies: Bodies, grid: Grid, state: WaterState, depth: float) -> np.ndarray:
     """Bodies whose footprint overlaps the grid and whose vertical extent reaches the water (tracked a little
     early: from two half heights above the highest wave)."""
@@ -167,10 +177,14 @@ def step_water(state: WaterState, cfg: WaterSurface, grid: Grid, bodies: Bodies,
         state.degree = free_degree(*state.heights.shape)
         state.coefficient = 2.0 - k * state.degree
         state.coefficient_k = k
-    volume = _water_mean(state.heights, np.flatnonzero(state.solid.ravel()) if state.solid.any() else None)
-    _disturb(state, cfg, grid, dt, rng)
+    volume = _water_mean(state.heights, _solid_index(state))
+    if cfg.disturbance_rate > 0.0 or state.splashes:
+        _disturb(state, cfg, grid, dt, rng)
     z, zp = state.heights, state.previous
-    bodies = bodies.take(_near(bodies, grid, state, cfg.depth)) if len(bodies) else bodies
+    if len(bodies):
+        near = _near(bodies, grid, state, cfg.depth)
+        if not near.all():
+            bodies = bodies.take(near)
     levels = plane_levels(z, state.solid, bodies, grid)
     plane_y = grid.y0 + levels
     sections = nudge(cross_sections(bodies, plane_y, grid, cfg.sphere_segments))
@@ -198,6 +212,8 @@ def step_water(state: WaterState, cfg: WaterSurface, grid: Grid, bodies: Bodies,
     state.point_keys, state.point_uv, state.point_kind = points.keys, points.uv, points.kind
     state.point_heights, state.point_previous, state.segments = new_points, previous_points, points.segments
     state.body_entities = bodies.entities.copy()
+    if cfg.wave_source != "outline":
+        state.solid_index = None
     state.polygons, state.polygon_counts = report.sections.polygons, report.sections.counts
     state.section_edges = (report.sections.polygons, report.sections._edges)  # next step's D'(t − 1) edges
     state.last_raised = report.change
@@ -216,15 +232,18 @@ def _outline_step(state, cfg, grid, bodies, sections, levels, plane_y, k, report
     solid, solid_body = solid_vertices(sections, grid)
     state.solid = np.zeros(z.shape, bool)
     state.solid.ravel()[solid] = True
-    pairs = coupling_pairs(points, ~state.solid, grid)
+    # one body: its scanline order is ascending and without repeats, as ``state.solid.nonzero()`` would give
+    state.solid_index = (state.solid, solid) if len(bodies) == 1 else None
+    pairs = coupling_pairs(points, state.solid, grid, solid_mask=True)
     new, new_points = propagate(z, zp, k, state.coefficient, state.degree, solid, pairs, heights, previous,
                                 _scratch(state), reuse=True)
     # eq. 2.6 / 2.7: a displacement of the point (its height history moves with it, so no velocity is injected)
-    new_points = new_points + change
+    new_points += change
     heights = heights + change
     if len(solid):  # inside the body: held at the plane S' (hidden under the body), no velocity
-        new.ravel()[solid] = levels[solid_body]
-        z.ravel()[solid] = levels[solid_body]
+        held = levels[solid_body]
+        new.ravel()[solid] = held
+        z.ravel()[solid] = held
     report.change, report.raised, report.lowered, report.solid = change, raised, lowered, solid
     return new, new_points, points, heights
 
