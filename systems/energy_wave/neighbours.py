@@ -2,10 +2,12 @@
 
 The points are hashed into a table of cells of size ``radius`` (Müller, Ten Minute Physics #11: integer cell
 coordinates hashed with three large primes, counting sort by hash); each query point scans the 27 cells around
-its own. Crowded buckets are sampled with weights (see :meth:`SpatialHash.buckets`) so the cost per query is
-bounded. Several independent groups (one per emitter: its points repel only its own queries) are computed at
+its own, skipping the cells whose nearest point is farther than the radius (about a quarter of them: exact, they
+hold no neighbour). Crowded buckets are sampled with weights (see :meth:`SpatialHash.buckets`) so the cost per
+query is bounded. Several independent groups (one per emitter: its points repel only its own queries) are computed at
 once, their tables laid end to end, with exactly the result each group would get alone. Everything is vectorized
-over the (query, bucket) pairs: the samples are laid out (sample, pair) in blocks of a few thousand, computed in
+over the (query, bucket) pairs: the samples are laid out (sample, pair) in blocks of a few thousand (sampled
+buckets, whose slots follow a stride, apart from fully scanned ones, whose slots are consecutive), computed in
 reused work arrays (no per-step allocation) and summed in a fixed order, so results are bit-reproducible.
 """
 
@@ -23,21 +25,23 @@ _PRIMES = np.array([73856093, 19349663, 83492791], dtype=np.int64)
 _STEPS = np.array([-1, 0, 1], dtype=np.int64)  # cell offsets along each axis: 3 x 3 x 3 neighbouring cells
 _SAME_POINT = 1e-18  # squared distance under which a neighbour counts as "at the same position"
 _GOLDEN = 0.6180339887498949  # low-discrepancy phases of the sampled buckets
-_BLOCK_PAIRS = 16384  # (sample, pair) slots per block: 128 KiB per float64 work array
+_BLOCK_SLOTS = 16384  # (sample, pair) slots per block: 64 KiB per float64 work array, the block stays in L2
 
 
-def _hash(cells: I64, table: int) -> I64:
+def _hash(cells: I64, table: int | I64) -> I64:
     """Cell (ix, iy, iz) -> bucket in [0, table): (ix·p1 xor iy·p2 xor iz·p3) mod table (table a power of 2)."""
     h = (cells[..., 0] * _PRIMES[0]) ^ (cells[..., 1] * _PRIMES[1]) ^ (cells[..., 2] * _PRIMES[2])
     return h & (table - 1)
 
 
-def _hash_around(cells: I64, table: int) -> I64:
+def _hash_around(cells: I64, mask: I64) -> I64:
     """Buckets (q, 27) of the 3 x 3 x 3 cells around each cell (q, 3): the hash of :func:`_hash`, each axis's
-    three products computed once."""
+    three products computed once; ``mask`` (q,) is each query's table size - 1."""
     hx, hy, hz = ((cells[:, axis, None] + _STEPS) * _PRIMES[axis] for axis in range(3))
     h = hx[:, :, None, None] ^ hy[:, None, :, None] ^ hz[:, None, None, :]
-    return h.reshape(len(cells), 27) & (table - 1)
+    h = h.reshape(len(cells), 27)
+    h &= mask[:, None]
+    return h
 
 
 def _table_size(points: int) -> int:
@@ -74,20 +78,21 @@ class _Workspace:
         return array[:size]
 
     def arrays(self, samples: int, pairs: int) -> tuple:
-        """Views (index, offset, deltas (3, ...), d2, square, ok, mask), each (samples, pairs)."""
+        """Views (index, deltas (3, ...), d2, w, ok, mask), each (samples, pairs)."""
         shape, size = (samples, pairs), samples * pairs
         if size > self.size:
-            self.size = max(size, _BLOCK_PAIRS)
+            self.size = max(size, _BLOCK_SLOTS)
             self.index = np.empty(self.size, dtype=np.int64)
-            self.floats = np.empty((6, self.size))
+            self.floats = np.empty((5, self.size))
             self.flags = np.empty((2, self.size), dtype=bool)
         floats = self.floats[:, :size]
-        return (self.index[:size].reshape(shape), floats[0].reshape(shape), floats[1:4].reshape((3, *shape)),
-                floats[4].reshape(shape), floats[5].reshape(shape), self.flags[0, :size].reshape(shape),
-                self.flags[1, :size].reshape(shape))
+        return (self.index[:size].reshape(shape), floats[0:3].reshape((3, *shape)), floats[3].reshape(shape),
+                floats[4].reshape(shape), self.flags[0, :size].reshape(shape), self.flags[1, :size].reshape(shape))
 
 
 _WORK = _Workspace()
+_K = np.arange(1 << 16, dtype=np.int64)[:, None]  # sample numbers k (a column)
+_KF = _K.astype(np.float64)
 
 
 class SpatialHash:
@@ -111,14 +116,16 @@ class SpatialHash:
             order = np.argsort(keys, kind="stable")
             table = slice(int(self.offsets[g]), int(self.offsets[g] + self.tables[g]))
             self.counts[table] = np.bincount(keys, minlength=int(self.tables[g]))
-            self.xyz[:, base: base + len(group)] = group[order].T
+            for axis in range(3):  # loop over the three axes
+                np.take(group[:, axis], order, out=self.xyz[axis, base: base + len(group)])
             base += len(group)
         self.starts = np.cumsum(self.counts, out=_WORK.table("starts", len(self.counts), np.int64))
         self.starts -= self.counts
 
-    def buckets(self, queries: list[F64], per_bucket_limit: int = 0) -> _Buckets:
-        """The non-empty buckets among the 27 cells around each query (``queries[g]`` of group g, numbered one
-        after the other), as flat (query, bucket) pairs, query-major and by bucket within a query.
+    def buckets(self, query: F64, sizes: list[int], per_bucket_limit: int = 0) -> _Buckets:
+        """The non-empty buckets among the 27 cells around each query (``query`` holds the groups' queries one
+        group after the other, ``sizes[g]`` of group g), as flat (query, bucket) pairs, query-major and by bucket
+        within a query.
 
         A group's crowded buckets are sampled when ``per_bucket_limit`` > 0 and one of its queries reaches a
         bucket of more points: ``per_bucket_limit`` samples at an even stride count/limit from a phase (a
@@ -127,28 +134,54 @@ class SpatialHash:
         bounded cost. Otherwise every point is taken with weight 1. A bucket reached twice by one query (a hash
         collision) is scanned once.
         """
-        parts, first = [], 0
-        for g, query in enumerate(queries):  # loop over groups (emitters): small arrays, each in cache
-            keys = _hash_around(np.floor(query / self.cells[g]).astype(np.int64), int(self.tables[g]))
-            keys.sort(axis=1)
-            keys += self.offsets[g]
-            counts = self.counts[keys]
-            counts[:, 1:][keys[:, 1:] == keys[:, :-1]] = 0
-            counts, keys = counts.ravel(), keys.ravel()
-            sampled = per_bucket_limit > 0 and int(counts.max(initial=0)) > per_bucket_limit
-            taken = np.minimum(counts, per_bucket_limit) if sampled else counts
-            nonempty = np.flatnonzero(taken)
-            taken = taken[nonempty]
-            phase = np.zeros(len(nonempty))  # every point taken: slot k is sample k
-            if sampled:  # serial number of the pair times the golden ratio, mod 1 (x - floor(x))
-                phase = np.arange(len(nonempty)) * _GOLDEN
-                phase -= np.floor(phase)
-            parts.append((nonempty // 27 + first, self.starts[keys[nonempty]], taken, counts[nonempty] / taken,
-                          phase))
-            first += len(query)
-        size = sum(len(part[0]) for part in parts)
-        return _Buckets(*(np.concatenate([part[i] for part in parts], out=_WORK.table(name, size, dtype))
-                          for i, (name, dtype) in enumerate(_Buckets.dtypes.items())))
+        groups = np.repeat(np.arange(len(sizes)), sizes)  # group of each query
+        scaled = query / self.cells[groups, None]
+        cells = np.floor(scaled)
+        beyond = _beyond_reach(scaled - cells, np.abs(scaled).max(axis=1))
+        keys = _hash_around(cells.astype(np.int64), (self.tables - 1)[groups])
+        # Sort each query's buckets, those of cells beyond reach last among equal buckets (lowest bit).
+        keys <<= 1
+        keys |= beyond
+        keys.sort(axis=1)
+        beyond = (keys & 1).astype(bool)
+        keys >>= 1
+        keys += self.offsets[groups, None]
+        counts = self.counts[keys]
+        counts[:, 1:][keys[:, 1:] == keys[:, :-1]] = 0
+        first_query = np.cumsum(sizes) - sizes
+        if per_bucket_limit > 0:  # sampled groups: some query of theirs reaches a crowded bucket
+            sampled = np.maximum.reduceat(counts.max(axis=1), first_query) > per_bucket_limit
+            cap = np.where(sampled, per_bucket_limit, np.iinfo(np.int64).max)[groups]
+            taken = np.minimum(counts, cap[:, None])
+        else:
+            taken = counts
+        counts, keys, taken = counts.ravel(), keys.ravel(), taken.ravel()
+        nonempty = np.flatnonzero(taken)
+        owner = nonempty // 27
+        # Phase of a sampled pair: its serial number within its group times the golden ratio, mod 1.
+        phase = np.arange(len(nonempty)) - np.searchsorted(owner, first_query)[groups[owner]]
+        phase = phase * _GOLDEN
+        phase -= np.floor(phase)
+        # Pairs whose bucket is reached only through cells beyond reach hold no point within reach: dropped
+        # after the phases and the sampling were decided, so the result is that of scanning them.
+        near = ~beyond.ravel()[nonempty]
+        nonempty, owner, phase = nonempty[near], owner[near], phase[near]
+        count = counts[nonempty]
+        taken = taken[nonempty]
+        return _Buckets(owner, self.starts[keys[nonempty]], taken, count / taken, phase)
+
+
+def _beyond_reach(fraction: F64, magnitude: F64) -> NDArray[np.bool_]:
+    """(q, 27) flags of the 3 x 3 x 3 cells around each query (same order as :func:`_hash_around`) whose nearest
+    point is farther than one cell size from the query: ``fraction`` (q, 3) is the query's position in its own
+    cell, in cell units. The margin covers rounding (the query's and the points' cell coordinates); far from the
+    origin (``magnitude``, in cells, beyond 1e9) nothing is flagged."""
+    gap = np.stack([fraction, np.zeros_like(fraction), 1.0 - fraction], axis=2)  # (q, axis, offset -1 0 +1)
+    gap *= gap
+    d2 = gap[:, 0, :, None, None] + gap[:, 1, None, :, None] + gap[:, 2, None, None, :]
+    beyond = d2.reshape(len(fraction), 27) > 1.0 + 1e-6
+    beyond[magnitude > 1e9] = False
+    return beyond
 
 
 class _Buckets(NamedTuple):
@@ -158,40 +191,42 @@ class _Buckets(NamedTuple):
     stride: F64  # slot step between samples, also their weight (1: every point)
     phase: F64  # sample k sits at slot floor((k + phase)·stride)
 
-    dtypes = {"owner": np.int64, "start": np.int64, "taken": np.int64, "stride": np.float64, "phase": np.float64}
 
-
-def _pair_sums(xyz: F64, point: F64, start: I64, taken: I64, stride: F64, phase: F64, reach: F64) -> F64:
+def _pair_sums(xyz: F64, point: F64, start: I64, taken: I64, stride: F64, phase: F64 | None, reach: F64,
+               out: F64) -> None:
     """Σ stride·(P − Q)/|P − Q|² over the samples Q within ``reach`` (squared radius) of one block of (query P,
-    bucket) pairs, ``point`` (3, pairs) holding each pair's P: returns (3, pairs).
+    bucket) pairs, ``point`` (3, pairs) holding each pair's P, into ``out`` (3, pairs).
 
-    The block is laid out (sample, pair), so every operation runs along the long pair axis. Sample k sits at
-    floor((k + phase)·stride) from the bucket's start; samples past ``taken`` are padding (their slots may point
-    past the end of the table: gathered with clipping, weight 0).
+    The block is laid out (sample, pair), so every operation runs along the long pair axis; ``taken[0]`` is the
+    most samples of a pair in the block. Sample k sits at floor((k + phase)·stride) from the bucket's start (at
+    k when ``phase`` is None: every point of the bucket); samples past ``taken`` are padding (their slots may
+    point past the end of the table: gathered with clipping, weight 0).
     """
-    samples = int(taken.max())
-    k = np.arange(samples)[:, None]
-    index, offset, deltas, d2, square, ok, mask = _WORK.arrays(samples, len(start))
-    np.add(k, phase, out=offset)
-    np.multiply(offset, stride, out=offset)
-    np.copyto(index, offset, casting="unsafe")  # floor: the offsets are >= 0
-    np.add(index, start, out=index)
+    samples = int(taken[0])
+    index, deltas, d2, w, ok, mask = _WORK.arrays(samples, len(start))
+    if phase is None:
+        np.add(_K[:samples], start, out=index)
+    else:
+        np.add(_KF[:samples], phase, out=w)
+        np.multiply(w, stride, out=w)
+        np.copyto(index, w, casting="unsafe")  # floor: the offsets are >= 0
+        np.add(index, start, out=index)
     for axis in range(3):  # loop over the three axes
         np.take(xyz[axis], index, out=deltas[axis], mode="clip")
         np.subtract(point[axis], deltas[axis], out=deltas[axis])
     dx, dy, dz = deltas
     np.multiply(dx, dx, out=d2)
-    np.add(d2, np.multiply(dy, dy, out=square), out=d2)
-    np.add(d2, np.multiply(dz, dz, out=square), out=d2)
+    d2 += np.multiply(dy, dy, out=w)
+    d2 += np.multiply(dz, dz, out=w)
     np.less_equal(d2, reach, out=ok)
-    np.logical_and(ok, np.greater(d2, _SAME_POINT, out=mask), out=ok)
-    if int(taken.min()) < samples:
-        np.logical_and(ok, np.less(k, taken, out=mask), out=ok)  # padding
+    ok &= np.greater(d2, _SAME_POINT, out=mask)
+    if int(taken[-1]) < samples:
+        ok &= np.less(_K[:samples], taken, out=mask)  # padding
     np.maximum(d2, _SAME_POINT, out=d2)
-    w = np.divide(stride, d2, out=d2)
-    np.multiply(w, ok, out=w)
-    np.multiply(deltas, w, out=deltas)
-    return deltas.sum(axis=1)
+    np.divide(stride, d2, out=w)
+    w *= ok
+    deltas *= w
+    np.add.reduce(deltas, axis=1, out=out)
 
 
 def neighbour_repulsion(query: F64, points: F64, radius: float, strength: float,
@@ -211,6 +246,15 @@ def neighbour_repulsion(query: F64, points: F64, radius: float, strength: float,
     return grouped_repulsion([(query, points[near], radius, strength)], per_bucket_limit)[0]
 
 
+def _blocks(pairs: I64, taken: I64):
+    """Consecutive blocks of ``pairs`` (sorted by ``taken``, most first) of about _BLOCK_SLOTS samples each."""
+    lo = 0
+    while lo < len(pairs):  # loop over blocks of pairs (bounded work arrays), not over particles
+        hi = lo + max(1, _BLOCK_SLOTS // int(taken[pairs[lo]]))
+        yield pairs[lo: hi]
+        lo = hi
+
+
 def grouped_repulsion(groups: list[tuple[F64, F64, float, float]], per_bucket_limit: int = 0) -> list[F64]:
     """:func:`neighbour_repulsion` of independent groups (query, points, radius, strength) at once, each group's
     ``points`` already restricted to :func:`in_reach` of its queries (the hash table is sized by them): the
@@ -219,29 +263,39 @@ def grouped_repulsion(groups: list[tuple[F64, F64, float, float]], per_bucket_li
     live = [g for g, (q, p, _, strength) in enumerate(groups) if len(q) and len(p) and strength != 0.0]
     if not live:
         return out
+    sizes = [len(groups[g][0]) for g in live]
     grid = SpatialHash([groups[g][1] for g in live], [groups[g][2] for g in live])
     query = np.concatenate([groups[g][0] for g in live])
-    group = np.repeat(np.arange(len(live)), [len(groups[g][0]) for g in live])
-    owner, start, taken, stride, phase = grid.buckets([groups[g][0] for g in live], per_bucket_limit)
+    owner, start, taken, stride, phase = grid.buckets(query, sizes, per_bucket_limit)
     if len(owner) == 0:
         return out
     reach = np.array([groups[g][2] * groups[g][2] for g in live])  # squared radius per group
-    # Blocks of buckets with equal sample counts: fullest first (a stable radix sort when counts fit 16 bits).
-    most = int(taken.max())
-    order = np.argsort((most - taken).astype(np.uint16) if most < 1 << 16 else -taken, kind="stable")
+    reach = reach[np.repeat(np.arange(len(live)), sizes)][owner]  # ... per pair
     columns = np.ascontiguousarray(query.T)
     sums = _WORK.table("sums", 3 * len(owner)).reshape(3, -1)
-    lo = 0
-    while lo < len(order):  # loop over blocks of pairs (bounded work arrays), not over particles
-        pick = order[lo: lo + max(1, _BLOCK_PAIRS // int(taken[order[lo]]))]
+    # Sampled pairs (all of per_bucket_limit samples) take their slots from the phase; the others take every
+    # point of their bucket, in blocks of pairs with equal sample counts (fullest first, a stable radix sort).
+    sampled = stride > 1.0
+    for pick in _blocks(np.flatnonzero(sampled), taken):
         who = owner[pick]
-        sums[:, pick] = _pair_sums(grid.xyz, columns[:, who], start[pick], taken[pick], stride[pick], phase[pick],
-                                   reach[group[who]])
-        lo += len(pick)
+        block = _WORK.table("block", 3 * len(pick)).reshape(3, -1)
+        _pair_sums(grid.xyz, columns[:, who], start[pick], taken[pick], stride[pick], phase[pick], reach[pick],
+                   block)
+        sums[:, pick] = block
+    rest = np.flatnonzero(~sampled)
+    if len(rest):
+        most = int(taken[rest].max())
+        rest = rest[np.argsort((most - taken[rest]).astype(np.uint16) if most < 1 << 16 else -taken[rest],
+                               kind="stable")]
+        for pick in _blocks(rest, taken):
+            who = owner[pick]
+            block = _WORK.table("block", 3 * len(pick)).reshape(3, -1)
+            _pair_sums(grid.xyz, columns[:, who], start[pick], taken[pick], stride[pick], None, reach[pick], block)
+            sums[:, pick] = block
     total = np.empty((len(query), 3))
     for axis in range(3):  # per query, its buckets summed in order
         total[:, axis] = np.bincount(owner, weights=sums[axis], minlength=len(query))
-    bounds = np.cumsum([0] + [len(groups[g][0]) for g in live])
+    bounds = np.cumsum([0] + sizes)
     for i, g in enumerate(live):  # loop over groups
         out[g] = total[bounds[i]: bounds[i + 1]] * groups[g][3]
     return out
