@@ -33,20 +33,29 @@ _MAX_SUBSTEPS = 8
 _OMEGA_DT = 0.3
 
 
+def _quaternion_products() -> F64:
+    """(16, 9): the rotation matrix of a unit quaternion q = (w, x, y, z), minus the identity, as a linear map of
+    the products q_a·q_b (flattened a·4 + b): R − I = 2·[[−yy − zz, xy − wz, xz + wy], [xy + wz, −xx − zz,
+    yz − wx], [xz − wy, yz + wx, −xx − yy]]."""
+    w, x, y, z = range(4)
+    terms = [[(-1, y, y), (-1, z, z)], [(1, x, y), (-1, w, z)], [(1, x, z), (1, w, y)],
+             [(1, x, y), (1, w, z)], [(-1, x, x), (-1, z, z)], [(1, y, z), (-1, w, x)],
+             [(1, x, z), (-1, w, y)], [(1, y, z), (1, w, x)], [(-1, x, x), (-1, y, y)]]
+    table = np.zeros((16, 9))
+    for entry, products in enumerate(terms):
+        for sign, a, b in products:
+            table[4 * a + b, entry] = 2.0 * sign
+    return table
+
+
+_QUATERNION_PRODUCTS = _quaternion_products()
+_IDENTITY9 = np.eye(3).ravel()
+
+
 def quat_to_matrix(q: F64) -> F64:
     """Rotation matrices (B, 3, 3) of unit quaternions (B, 4) (w, x, y, z); same as engine.spatial's, for many."""
-    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
-    m = np.empty((len(q), 3, 3))
-    m[:, 0, 0] = 1.0 - 2.0 * (y * y + z * z)
-    m[:, 0, 1] = 2.0 * (x * y - w * z)
-    m[:, 0, 2] = 2.0 * (x * z + w * y)
-    m[:, 1, 0] = 2.0 * (x * y + w * z)
-    m[:, 1, 1] = 1.0 - 2.0 * (x * x + z * z)
-    m[:, 1, 2] = 2.0 * (y * z - w * x)
-    m[:, 2, 0] = 2.0 * (x * z - w * y)
-    m[:, 2, 1] = 2.0 * (y * z + w * x)
-    m[:, 2, 2] = 1.0 - 2.0 * (x * x + y * y)
-    return m
+    products = (q[:, :, None] * q[:, None, :]).reshape(len(q), 16)
+    return (products @ _QUATERNION_PRODUCTS + _IDENTITY9).reshape(len(q), 3, 3)
 
 
 def _lattice(n: int) -> F64:
@@ -119,10 +128,10 @@ def _samples(bodies: BodyArrays, rot: F64) -> tuple[F64, F64, F64]:
     return np.einsum("bij,bsj->bsi", rot, local), volume, thickness
 
 
-def water_forces(bodies: BodyArrays, rot: F64, heights: F64, rise: F64, grid: Grid, density: float,
+def water_forces(bodies: BodyArrays, rot: F64, heights: F64, previous: F64, dt: float, grid: Grid, density: float,
                  gravity: F64) -> tuple[F64, F64, F64, F64]:
     """Buoyancy force and torque about the centre of mass (B, 3), submerged volume (B,) and the mean vertical
-    water velocity over the submerged samples (B,) (``rise`` = z(t) − z(t−1) per step, already divided by Δt)."""
+    water velocity (z(t) − z(t−1)) / Δt over the submerged samples (B,), ``previous`` = z(t − 1)."""
     offset, dv, s = _samples(bodies, rot)
     p = bodies.position[:, None, :] + offset
     uv = grid.to_uv(p[..., [0, 2]])
@@ -133,13 +142,15 @@ def water_forces(bodies: BodyArrays, rot: F64, heights: F64, rise: F64, grid: Gr
     push = density * gravity[:, None] * sub
     force = np.stack([-push * du / grid.h, push, -push * dz / grid.h], -1)
     submerged = sub.sum(axis=1)
-    w = bilinear(rise, uv)
+    w = (eta - bilinear(previous, uv)) / dt
     water_velocity = np.sum(sub * w, axis=1) / np.where(submerged > 0.0, submerged, 1.0)
     return force.sum(axis=1), np.cross(offset, force).sum(axis=1), submerged, water_velocity
 
 
 def apply_impulses(bodies: BodyArrays, impulse: F64, angular_impulse: F64) -> None:
     """v += J/m, ω += I⁻¹·L (world inverse inertia)."""
+    if not (impulse.any() or angular_impulse.any()):
+        return
     rot = quat_to_matrix(bodies.rotation)
     bodies.velocity += impulse / bodies.mass[:, None]
     inv = _world_inverse_inertia(rot, inertia(bodies))
@@ -159,7 +170,7 @@ def substeps(bodies: BodyArrays, density: float, dt: float) -> int:
 
 def integrate(bodies: BodyArrays, dt: float, water: tuple | None, linear_drag: float = 0.0,
               angular_drag: float = 0.0, density: float = 1000.0) -> F64:
-    """Advance the bodies by ``dt`` (sub-stepped); ``water`` = (heights, rise per second, grid) or None.
+    """Advance the bodies by ``dt`` (sub-stepped); ``water`` = (heights z(t), z(t − 1), grid) or None.
     Returns the submerged volume (B,) of the last sub-step."""
     n = substeps(bodies, density, dt) if water is not None else 1
     h = dt / n
@@ -176,8 +187,9 @@ def integrate(bodies: BodyArrays, dt: float, water: tuple | None, linear_drag: f
         water_up = np.zeros(len(bodies))
         spin_drag = np.zeros(len(bodies))
         if water is not None:
-            heights, rise, grid = water
-            f, t, submerged, water_up = water_forces(bodies, rot, heights, rise, grid, density, bodies.gravity)
+            heights, previous, grid = water
+            f, t, submerged, water_up = water_forces(bodies, rot, heights, previous, dt, grid, density,
+                                                     bodies.gravity)
             force += f
             torque += t
             drag = linear_drag * density * submerged / bodies.mass

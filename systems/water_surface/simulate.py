@@ -52,14 +52,14 @@ def gather_wave_bodies(world: World) -> Bodies:
             if c.shape in ("box", "sphere") and not c.is_trigger]
     if not rows:
         return empty_bodies()
-    entities = np.array([e for e, _, _ in rows], np.int64)
-    shapes = np.array([BOX if c.shape == "box" else SPHERE for _, _, c in rows], np.int8)
-    scale = np.abs(np.stack([t.scale for _, t, _ in rows]))
-    half = np.stack([c.half_extents for _, _, c in rows]) * scale
-    radius = np.array([c.radius for _, _, c in rows]) * scale.max(axis=1)
-    position = np.stack([t.position for _, t, _ in rows])
-    rotation = quat_to_matrix(np.stack([t.rotation for _, t, _ in rows]))
-    return Bodies(entities, shapes, half, radius, position, rotation)
+    entities, transforms, colliders = zip(*rows)
+    scale = np.abs(np.array([t.scale for t in transforms]))
+    return Bodies(np.array(entities, np.int64),
+                  np.array([BOX if c.shape == "box" else SPHERE for c in colliders], np.int8),
+                  np.array([c.half_extents for c in colliders]) * scale,
+                  np.array([c.radius for c in colliders]) * scale.max(axis=1),
+                  np.array([t.position for t in transforms]),
+                  quat_to_matrix(np.array([t.rotation for t in transforms])))
 
 
 def _waters(world: World) -> list:
@@ -127,54 +127,55 @@ def bodies_system(world: World, dt: float) -> None:
     rows = _gather_dynamic(world, dt)
     if not rows:
         return
-    scale = np.abs(np.stack([t.scale for _, t, _, _, _ in rows]))
+    _, transforms, configs, states, colliders = zip(*rows)
+    scale = np.abs(np.array([t.scale for t in transforms]))
+    constants = np.array([(c.mass, c.gravity, c.linear_damping, c.angular_damping, c.restitution, c.friction)
+                          for c in configs]).T
     arrays = BodyArrays(
-        shapes=np.array([BOX if c.shape == "box" else SPHERE for *_, c in rows], np.int8),
-        half=np.stack([c.half_extents for *_, c in rows]) * scale,
-        radius=np.array([c.radius for *_, c in rows]) * scale.max(axis=1),
-        mass=np.array([cfg.mass for _, _, cfg, _, _ in rows]),
-        position=np.stack([t.position for _, t, _, _, _ in rows]),
-        rotation=np.stack([t.rotation for _, t, _, _, _ in rows]),
-        velocity=np.stack([s.velocity for _, _, _, s, _ in rows]),
-        spin=np.stack([s.angular_velocity for _, _, _, s, _ in rows]),
-        force=np.stack([s.force for _, _, _, s, _ in rows]),
-        torque=np.stack([s.torque for _, _, _, s, _ in rows]),
-        gravity=np.array([cfg.gravity for _, _, cfg, _, _ in rows]),
-        linear_damping=np.array([cfg.linear_damping for _, _, cfg, _, _ in rows]),
-        angular_damping=np.array([cfg.angular_damping for _, _, cfg, _, _ in rows]),
-        restitution=np.array([cfg.restitution for _, _, cfg, _, _ in rows]),
-        friction=np.array([cfg.friction for _, _, cfg, _, _ in rows]),
+        shapes=np.array([BOX if c.shape == "box" else SPHERE for c in colliders], np.int8),
+        half=np.array([c.half_extents for c in colliders]) * scale,
+        radius=np.array([c.radius for c in colliders]) * scale.max(axis=1),
+        mass=constants[0], position=np.array([t.position for t in transforms]),
+        rotation=np.array([t.rotation for t in transforms]),
+        velocity=np.array([s.velocity for s in states]), spin=np.array([s.angular_velocity for s in states]),
+        force=np.array([s.force for s in states]), torque=np.array([s.torque for s in states]),
+        gravity=constants[1], linear_damping=constants[2], angular_damping=constants[3],
+        restitution=constants[4], friction=constants[5],
     )
-    apply_impulses(arrays, np.stack([s.impulse for *_, s, _ in rows]),
-                   np.stack([s.angular_impulse for *_, s, _ in rows]))
+    apply_impulses(arrays, np.array([s.impulse for s in states]), np.array([s.angular_impulse for s in states]))
     owner = -np.ones(len(rows), np.int64)
     submerged = np.zeros(len(rows))
     waters = _waters(world)
     for w, (_, (t, cfg, state)) in enumerate(waters):  # first water (lowest id) under a body carries it
         grid = water_grid(cfg, state, t)
-        over = grid.inside(grid.to_uv(arrays.position[:, [0, 2]])) & (owner < 0)
+        over = grid.inside(grid.to_uv(arrays.position[:, ::2])) & (owner < 0)
         owner[over] = w
     for w in range(-1, len(waters)):
         index = np.flatnonzero(owner == w)
         if len(index) == 0:
             continue
-        group = _take(arrays, index)
+        whole = len(index) == len(rows)  # every body in the same place: no need to split the arrays
+        group = arrays if whole else _take(arrays, index)
         if w < 0:
             integrate(group, dt, None)
         else:
             _, (t, cfg, state) = waters[w]
             grid = water_grid(cfg, state, t)
-            rise = (state.heights - state.previous) / dt
-            submerged[index] = integrate(group, dt, (state.heights, rise, grid), cfg.linear_drag, cfg.angular_drag,
-                                         cfg.water_density)
+            submerged[index] = integrate(group, dt, (state.heights, state.previous, grid), cfg.linear_drag,
+                                         cfg.angular_drag, cfg.water_density)
             pool_contacts(group, grid, grid.y0 - cfg.depth, np.ones(len(index), bool))
-        _put(arrays, index, group)
-    for b, (_, t, _, state, _) in enumerate(rows):
-        t.position, t.rotation = arrays.position[b].copy(), arrays.rotation[b].copy()
-        state.velocity, state.angular_velocity = arrays.velocity[b].copy(), arrays.spin[b].copy()
-        state.impulse, state.angular_impulse = np.zeros(3), np.zeros(3)
-        state.force, state.torque = np.zeros(3), np.zeros(3)
-        state.submerged_volume = float(submerged[b])
+        if not whole:
+            _put(arrays, index, group)
+    # write back: rows of fresh arrays (one copy each, not one per body)
+    positions, rotations = list(arrays.position.copy()), list(arrays.rotation.copy())
+    velocities, spins = list(arrays.velocity.copy()), list(arrays.spin.copy())
+    zeros = list(np.zeros((4 * len(rows), 3)))
+    volumes = submerged.tolist()
+    for b, (t, state) in enumerate(zip(transforms, states)):
+        t.position, t.rotation = positions[b], rotations[b]
+        state.velocity, state.angular_velocity = velocities[b], spins[b]
+        state.impulse, state.angular_impulse, state.force, state.torque = zeros[4 * b:4 * b + 4]
+        state.submerged_volume = volumes[b]
 
 
 _FIELDS = ("shapes", "half", "radius", "mass", "position", "rotation", "velocity", "spin", "force", "torque",
