@@ -91,9 +91,10 @@ class TerrainConfig(ConfigModel):
     colors: list[Vec3] = Field([(0.07, 0.15, 0.04), (0.13, 0.22, 0.06), (0.28, 0.24, 0.16), (0.75, 0.75, 0.75)],
                                min_length=2, max_length=8, description="Colour ramp from low to high.")
     centered: bool = Field(True, description="Centre the terrain on the entity's position.")
-    lod_pixels: float = Field(4.0, ge=0.0, le=64.0,
-                              description="Level of detail: each chunk is drawn with the coarsest grid whose quads "
-                                          "stay within this many pixels on screen; 0 draws full detail everywhere.")
+    lod_pixels: float = Field(2.0, ge=0.0, le=64.0,
+                              description="Level of detail: each chunk is drawn with the coarsest grid whose height "
+                                          "error stays within this many pixels on screen (its quads within 8x that, "
+                                          "2x in top views); 0 draws full detail everywhere.")
 
     @field_validator("heightmap")
     @classmethod

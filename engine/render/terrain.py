@@ -6,9 +6,14 @@ border vertices), laid out level-major so that neighbouring chunks drawn at one 
 Per view and frame (numpy over chunks, no GL reads):
 
 * chunks whose bounding box lies outside the view frustum are skipped;
-* a chunk's level is the coarsest whose quads still measure at most ``detail_pixels`` on screen at the chunk's
-  nearest point (pixels per metre from the projection: constant for orthographic views, 1/distance for
-  perspective ones), the screen-space criterion of geomipmapping (de Boer 2000);
+* a chunk's level is the coarsest whose geometric error — the largest height difference between the full grid
+  and the level's interpolated surface, computed once per chunk and level — projects to at most
+  ``detail_pixels`` on screen at the chunk's nearest point (pixels per metre from the projection: constant for
+  orthographic views, 1/distance for perspective ones), the screen-space error criterion of geomipmapping
+  (de Boer 2000); its quads must also stay within a multiple of ``detail_pixels`` on screen, so that the
+  per-vertex lighting keeps its detail: ``QUAD_PIXELS_PERSPECTIVE`` (8) in perspective views, and
+  ``QUAD_PIXELS_ORTHOGRAPHIC`` (2) in orthographic ones, which look down on the ground so that a height
+  error moves no pixel and shading detail is all that a coarser level loses;
 * cracks between neighbours at different levels are hidden by skirts: along every interior chunk edge a strip
   hangs from the edge vertices to copies lowered by the field's largest chunk height range, drawn with the
   edge's colour (the vertex shader lowers a skirt vertex after shading it).
@@ -23,7 +28,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-CHUNK = 32  # quads per chunk side; a power of two so that levels 0..log2(CHUNK) all fit exactly
+CHUNK = 16  # quads per chunk side; a power of two so that levels 0..log2(CHUNK) all fit exactly
+QUAD_PIXELS_PERSPECTIVE = 8.0  # on-screen quad size allowed per pixel of tolerated error, perspective views
+QUAD_PIXELS_ORTHOGRAPHIC = 2.0  # the same for orthographic (top) views, where height error moves nothing
 VERTEX_FLOATS = 7  # position (3), normal (3), skirt depth (1)
 
 
@@ -37,6 +44,7 @@ class TerrainChunks:
     count: np.ndarray  # (levels, chunks) int64: number of indices
     box_min: np.ndarray  # (chunks, 3) local-space bounding boxes (skirts excluded)
     box_max: np.ndarray  # (chunks, 3)
+    error: np.ndarray  # (levels, chunks): largest |height - level's interpolated height| (local units)
     quad_size: float  # grid spacing (local units) of level 0
 
     @property
@@ -60,6 +68,27 @@ def _grid_triangles(rows_idx: np.ndarray, cols_idx: np.ndarray, cols: int) -> np
     v = r * cols + c
     a, b, cc, d = v[:-1, :-1], v[1:, :-1], v[:-1, 1:], v[1:, 1:]
     return np.stack([a, b, cc, cc, b, d], axis=-1).ravel()
+
+
+def _interpolation(fine: np.ndarray, coarse: np.ndarray) -> np.ndarray:
+    """(len(fine), len(coarse)) matrix of linear interpolation weights from coarse grid lines to fine ones."""
+    upper = np.clip(np.searchsorted(coarse, fine, side="right"), 1, len(coarse) - 1)
+    lower = upper - 1
+    t = (fine - coarse[lower]) / (coarse[upper] - coarse[lower])
+    weights = np.zeros((len(fine), len(coarse)))
+    rows = np.arange(len(fine))
+    weights[rows, lower] = 1.0 - t
+    weights[rows, upper] += t
+    return weights
+
+
+def level_error(h: np.ndarray, rows_idx: np.ndarray, cols_idx: np.ndarray, r0: int, c0: int) -> float:
+    """Largest height difference between a chunk's full grid and its surface at a level (bilinear estimate)."""
+    block = h[r0:rows_idx[-1] + 1, c0:cols_idx[-1] + 1]
+    wr = _interpolation(np.arange(r0, rows_idx[-1] + 1), rows_idx)
+    wc = _interpolation(np.arange(c0, cols_idx[-1] + 1), cols_idx)
+    coarse = h[np.ix_(rows_idx, cols_idx)]
+    return float(np.abs(block - wr @ coarse @ wc.T).max())
 
 
 def _skirt_triangles(edge: np.ndarray, skirt_of: np.ndarray) -> np.ndarray:
@@ -100,11 +129,13 @@ def build_terrain_chunks(field, chunk: int = CHUNK) -> TerrainChunks:
     skirts[:, 6] = depth
     vertices = np.concatenate([grid, skirts]).astype(np.float32)
 
-    parts, first, count, offset = [], np.zeros((levels, len(spans)), np.int64), np.zeros((levels, len(spans)), np.int64), 0
+    shape = (levels, len(spans))
+    parts, first, count, error, offset = [], np.zeros(shape, np.int64), np.zeros(shape, np.int64), np.zeros(shape), 0
     for level in range(levels):
         step = 1 << level
         for k, (r0, r1, c0, c1) in enumerate(spans):
             rl, cl = _lines(r0, r1, step), _lines(c0, c1, step)
+            error[level, k] = level_error(h, rl, cl, r0, c0) if level else 0.0
             tris = [_grid_triangles(rl, cl, cols)]
             if r0 > 0:
                 tris.append(_skirt_triangles(r0 * cols + cl, skirt_of))
@@ -120,8 +151,9 @@ def build_terrain_chunks(field, chunk: int = CHUNK) -> TerrainChunks:
             offset += idx.size
     box_min = np.array([[xs[c0], h[r0:r1 + 1, c0:c1 + 1].min(), zs[r0]] for r0, r1, c0, c1 in spans])
     box_max = np.array([[xs[c1], h[r0:r1 + 1, c0:c1 + 1].max(), zs[r1]] for r0, r1, c0, c1 in spans])
+    error = np.maximum.accumulate(error, axis=0)  # a coarser level never counts as more exact
     return TerrainChunks(vertices, np.concatenate(parts).astype(np.uint32), first, count, box_min, box_max,
-                         float(field.spacing))
+                         error, float(field.spacing))
 
 
 def _corners(box_min: np.ndarray, box_max: np.ndarray) -> np.ndarray:
@@ -153,10 +185,12 @@ def select_levels(mesh: TerrainChunks, model: np.ndarray, view_proj: np.ndarray,
     pixels_per_unit = 0.5 * view_height * abs(float(proj[1, 1]))
     if not ortho:
         pixels_per_unit = pixels_per_unit / np.maximum(distance, 1e-3)
-    quad_pixels = mesh.quad_size * scale_xz * pixels_per_unit
-    ratio = detail_pixels / np.maximum(quad_pixels, 1e-9)
-    level = np.floor(np.log2(np.maximum(ratio, 1.0))).astype(np.int64)
-    level = np.minimum(level, mesh.levels - 1)
+    quad_pixels = mesh.quad_size * scale_xz * pixels_per_unit * (1 << np.arange(mesh.levels))[:, None]
+    scale_y = float(np.linalg.norm(np.asarray(model, np.float64)[:3, 1]))
+    error_pixels = mesh.error * scale_y * pixels_per_unit
+    quad_limit = (QUAD_PIXELS_ORTHOGRAPHIC if ortho else QUAD_PIXELS_PERSPECTIVE) * detail_pixels
+    ok = (error_pixels <= detail_pixels) & (quad_pixels <= quad_limit)
+    level = np.maximum(np.cumprod(ok, axis=0).sum(axis=0) - 1, 0)
     return np.where(outside, -1, level)
 
 
