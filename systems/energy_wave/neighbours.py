@@ -36,12 +36,13 @@ def _hash(cells: I64, table: int | I64) -> I64:
 
 def _hash_around(cells: I64, mask: I64) -> I64:
     """Buckets (q, 27) of the 3 x 3 x 3 cells around each cell (q, 3): the hash of :func:`_hash`, each axis's
-    three products computed once; ``mask`` (q,) is each query's table size - 1."""
-    hx, hy, hz = ((cells[:, axis, None] + _STEPS) * _PRIMES[axis] for axis in range(3))
-    h = hx[:, :, None, None] ^ hy[:, None, :, None] ^ hz[:, None, None, :]
-    h = h.reshape(len(cells), 27)
-    h &= mask[:, None]
-    return h
+    three products computed once; ``mask`` (q,) is each query's table size - 1. Built (27, q), the long axis
+    inner, then transposed."""
+    hx, hy, hz = ((cells[:, axis] + _STEPS[:, None]) * _PRIMES[axis] for axis in range(3))  # (3, q) each
+    h = hx[:, None, None, :] ^ hy[None, :, None, :] ^ hz[None, None, :, :]
+    h = h.reshape(27, len(cells))
+    h &= mask
+    return h.T.copy()
 
 
 def _table_size(points: int) -> int:
@@ -176,12 +177,15 @@ def _beyond_reach(fraction: F64, magnitude: F64) -> NDArray[np.bool_]:
     point is farther than one cell size from the query: ``fraction`` (q, 3) is the query's position in its own
     cell, in cell units. The margin covers rounding (the query's and the points' cell coordinates); far from the
     origin (``magnitude``, in cells, beyond 1e9) nothing is flagged."""
-    gap = np.stack([fraction, np.zeros_like(fraction), 1.0 - fraction], axis=2)  # (q, axis, offset -1 0 +1)
-    gap *= gap
-    d2 = gap[:, 0, :, None, None] + gap[:, 1, None, :, None] + gap[:, 2, None, None, :]
-    beyond = d2.reshape(len(fraction), 27) > 1.0 + 1e-6
-    beyond[magnitude > 1e9] = False
-    return beyond
+    gaps = []
+    for axis in range(3):  # squared gaps to the cells at offsets -1, 0, +1 along each axis: (3, q)
+        f = fraction[:, axis]
+        gaps.append(np.stack([f * f, np.zeros_like(f), (1.0 - f) * (1.0 - f)]))
+    gx, gy, gz = gaps
+    d2 = gx[:, None, None, :] + gy[None, :, None, :] + gz[None, None, :, :]
+    beyond = d2.reshape(27, len(fraction)) > 1.0 + 1e-6
+    beyond[:, magnitude > 1e9] = False
+    return beyond.T
 
 
 class _Buckets(NamedTuple):

@@ -1,9 +1,10 @@
 """The energy-wave render feature: additive billboards expanded on the GPU, plus a glow (bloom) pass.
 
 Per frame, :func:`~systems.energy_wave.extract.extract_frame` packs one record per particle; they are uploaded to
-an RGBA32F texture (three texels a record) and drawn with instanced quads: per emitter, one draw for single
-sprites, one for trails (instances = particles × M) and one for bars (particles × N); the vertex shader finds its
-particle and sub-sprite from ``gl_InstanceID`` (eqs. 3.7–3.9). Blending is additive (ONE, ONE), depth-tested against
+an RGBA32F texture (three texels a record) and drawn as quads of two triangles with no vertex buffer: per emitter,
+one draw for single sprites, one for trails (6 × particles × M vertices) and one for bars (6 × particles × N);
+the vertex shader finds its particle, sub-sprite and corner from ``gl_VertexID`` (eqs. 3.7–3.9). (Not instanced:
+llvmpipe runs its vertex pipeline once per instance, a fixed cost that made up most of the vertex work.) Blending is additive (ONE, ONE), depth-tested against
 the scene with no depth writes, so no sorting is needed.
 
 Passes per view, in the transparent phase (off-screen particles, Nguyen, GPU Gems 3 ch. 23: the soft sprites are
@@ -36,15 +37,14 @@ SHADERS = Path(__file__).parent / "shaders"
 RECORDS_PER_ROW = 1024
 PARTICLE_DOWNSCALE = 2  # sprites are drawn at half the view's resolution (off-screen particles), then upsampled
 GLOW_DOWNSCALE = 4
-GRADIENT_SIZE = 64
+VERTICES_PER_SPRITE = 6  # two triangles
 
 
-def radial_gradient(size: int = GRADIENT_SIZE) -> np.ndarray:
-    """The sprite texture: a radial falloff (1 - r²)² · exp(-3 r²), 1 at the centre, 0 at the rim."""
-    c = (np.arange(size) + 0.5) / size * 2.0 - 1.0
-    r2 = c[None, :] ** 2 + c[:, None] ** 2
-    g = np.where(r2 < 1.0, (1.0 - r2) ** 2 * np.exp(-3.0 * r2), 0.0)
-    return g.astype(np.float32)
+def radial_gradient(r2: np.ndarray) -> np.ndarray:
+    """The sprite's falloff at squared distance ``r2`` from its centre (sprite radius 1): (1 - r²)² · exp(-3 r²)
+    inside, 0 outside; ``particles.frag`` evaluates the same formula per fragment."""
+    r2 = np.asarray(r2, dtype=np.float64)
+    return np.where(r2 < 1.0, (1.0 - r2) ** 2 * np.exp(-3.0 * r2), 0.0)
 
 
 def _set(prog: moderngl.Program, **values) -> None:
@@ -64,7 +64,7 @@ class EnergyWaveFeature(RenderFeature):
         self._records: moderngl.Texture | None = None
         self._rows = 0
         self._uploaded_frame = -1
-        self._gradient: moderngl.Texture | None = None
+        self._staging = np.zeros((0, RECORD_FLOATS), np.float32)  # the upload's whole rows, reused
         self._vao: moderngl.VertexArray | None = None
         self._fullscreen: dict[str, moderngl.VertexArray] = {}
 
@@ -78,12 +78,7 @@ class EnergyWaveFeature(RenderFeature):
 
     def _sprite_vao(self) -> moderngl.VertexArray:
         if self._vao is None:
-            prog = self._program("particles")
-            self._vao = self.ctx.vertex_array(prog, [(self.renderer.quad_buffer, "2f", "in_corner")])
-            self._gradient = self.ctx.texture((GRADIENT_SIZE, GRADIENT_SIZE), 1, radial_gradient().tobytes(),
-                                              dtype="f4")
-            self._gradient.filter = (moderngl.LINEAR, moderngl.LINEAR)
-            self._gradient.repeat_x = self._gradient.repeat_y = False
+            self._vao = self.ctx.vertex_array(self._program("particles"), [])  # corners from gl_VertexID
         return self._vao
 
     def _fullscreen_vao(self, name: str) -> moderngl.VertexArray:
@@ -106,18 +101,20 @@ class EnergyWaveFeature(RenderFeature):
             self._rows = 1 << (rows - 1).bit_length()
             self._records = self.ctx.texture((RECORDS_PER_ROW * 3, self._rows), 4, dtype="f4")
             self._records.filter = (moderngl.NEAREST, moderngl.NEAREST)
-        padded = np.zeros((rows * RECORDS_PER_ROW, RECORD_FLOATS), np.float32)
-        padded[:n] = data.records
-        self._records.write(padded.tobytes(), viewport=(0, 0, RECORDS_PER_ROW * 3, rows))
+        if len(self._staging) < rows * RECORDS_PER_ROW:
+            self._staging = np.zeros((self._rows * RECORDS_PER_ROW, RECORD_FLOATS), np.float32)
+        staging = self._staging[: rows * RECORDS_PER_ROW]
+        staging[:n] = data.records
+        staging[n:] = 0.0  # the tail of the last row (never drawn)
+        self._records.write(staging, viewport=(0, 0, RECORDS_PER_ROW * 3, rows))
 
     # ---------------------------------------------------------------------------------------------- drawing
     def _draw_sprites(self, view: View, data: FrameData) -> None:
         vao = self._sprite_vao()
         prog = vao.program
         self._records.use(0)
-        self._gradient.use(1)
         view_m = view.view.astype(np.float64)
-        _set(prog, records=0, gradient=1, scene_depth=2, records_per_row=RECORDS_PER_ROW,
+        _set(prog, records=0, scene_depth=2, records_per_row=RECORDS_PER_ROW,
              camera_right=tuple(map(float, view_m[0, :3])), camera_up=tuple(map(float, view_m[1, :3])),
              depth_scale=float(PARTICLE_DOWNSCALE))
         prog["view_proj"].write(view.view_proj.T.astype(np.float32).tobytes())
@@ -134,7 +131,7 @@ class EnergyWaveFeature(RenderFeature):
                 count = emitter.counts[group]
                 if count:
                     _set(prog, first=first, mode=mode, sprites=sprites)
-                    vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=count * sprites)
+                    vao.render(moderngl.TRIANGLES, vertices=VERTICES_PER_SPRITE * count * sprites)
                 first += count
 
     def add_passes(self, graph, view: View, data: FrameData) -> None:
@@ -219,8 +216,8 @@ class EnergyWaveFeature(RenderFeature):
         graph.add_pass(f"energy_wave.composite.{view.name}", composite_setup, composite_execute)
 
     def release(self) -> None:
-        for obj in (self._records, self._gradient, self._vao, *self._fullscreen.values()):
+        for obj in (self._records, self._vao, *self._fullscreen.values()):
             if obj is not None:
                 obj.release()
-        self._records = self._gradient = self._vao = None
+        self._records = self._vao = None
         self._fullscreen.clear()

@@ -28,6 +28,7 @@ The incoming beam velocity is absorbed by the hit.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -184,11 +185,11 @@ def assign_patterns(u_circular: F64, u_continuous: F64, alpha: float, beta: floa
 
 
 def is_circular(pattern: NDArray[np.int8]) -> NDArray[np.bool_]:
-    return (pattern >= 0) & (pattern % 2 == 0)
+    return (pattern >= 0) & ((pattern & 1) == 0)  # a bit test: int8 % is slow
 
 
 def is_irregular(pattern: NDArray[np.int8]) -> NDArray[np.bool_]:
-    return (pattern >= 0) & (pattern % 2 == 1)
+    return (pattern >= 0) & ((pattern & 1) == 1)
 
 
 def bar_offsets(samples: int, spacing: float) -> F64:
@@ -266,7 +267,7 @@ class _Scratch:
         self._arrays: dict[str, np.ndarray] = {}
 
     def get(self, name: str, shape: tuple[int, ...]) -> F64:
-        size = int(np.prod(shape))
+        size = math.prod(shape)
         array = self._arrays.get(name)
         if array is None or array.size < size:
             array = self._arrays[name] = np.empty(max(size, 1024))

@@ -1,7 +1,8 @@
 #version 330
 // Energy-wave sprites (seeds/000, section 3.4), expanded on the GPU from one record per particle.
 // Records live in an RGBA32F texture, three texels each: (position, alpha), (hit point P0, -), (direction d, -).
-// Instance k of a draw is sprite j = k % sprites of particle first + k / sprites:
+// No instancing (llvmpipe pays a fixed cost per instance): vertex v of a draw is corner v % 6 of sprite
+// k = v / 6 (two triangles of a quad), and sprite k is sub-sprite j = k % sprites of particle first + k / sprites:
 //   mode 0: one sprite at the particle (beam particles, grains);
 //   mode 1: continuous trail, eq. 3.7: T_j = P0 + (P1 - P0) j / M, size shrinking towards P1;
 //   mode 2: bar, eq. 3.8: U_j = Q + (-1)^(j+1) u j d, and tip size eq. 3.9: S_j = (N - j (1 - t)) / N S
@@ -18,8 +19,7 @@ uniform float size;          // S, metres
 uniform float spacing;       // u * S, metres
 uniform float roundness;     // t
 uniform float trail_end;     // size factor of the last trail sprite
-in vec2 in_corner;
-out vec2 v_uv;
+out vec2 v_corner;         // position in the sprite, -1..1 on each axis
 out float v_alpha;
 
 vec4 fetch(int particle, int texel) {
@@ -27,8 +27,12 @@ vec4 fetch(int particle, int texel) {
 }
 
 void main() {
-    int particle = first + gl_InstanceID / sprites;
-    int j = gl_InstanceID % sprites;
+    const int corners[6] = int[](0, 1, 2, 2, 1, 3);  // triangles (0 1 2) (2 1 3) of the quad's corners
+    int c = corners[gl_VertexID % 6];
+    vec2 in_corner = vec2((c & 1) == 1 ? 1.0 : -1.0, (c & 2) == 2 ? 1.0 : -1.0);
+    int sprite = gl_VertexID / 6;
+    int particle = first + sprite / sprites;
+    int j = sprite % sprites;
     vec4 a = fetch(particle, 0);
     vec3 pos = a.xyz;
     float s = size;
@@ -42,7 +46,7 @@ void main() {
         pos = a.xyz + side * spacing * float(j) * d;
         s *= (float(sprites) - float(j) * (1.0 - roundness)) / float(sprites);
     }
-    v_uv = in_corner * 0.5 + 0.5;
+    v_corner = in_corner;
     v_alpha = a.w;
     vec3 world = pos + (camera_right * in_corner.x + camera_up * in_corner.y) * s;
     gl_Position = view_proj * vec4(world, 1.0);

@@ -133,7 +133,6 @@ def _expand_on_gpu(mode, sprites, records, roundness=0.5, spacing=0.4, size=1.0,
 
     ctx = gl_context()
     prog = ctx.program(vertex_shader=(SHADERS / "particles.vert").read_text(), varyings=["gl_Position"])
-    quad = ctx.buffer(np.array([-1, -1, 1, -1, -1, 1, 1, 1], np.float32).tobytes())
     data = np.zeros((RECORDS_PER_ROW, 12), np.float32)
     data[: len(records)] = records
     tex = ctx.texture((RECORDS_PER_ROW * 3, 1), 4, data.tobytes(), dtype="f4")
@@ -146,15 +145,15 @@ def _expand_on_gpu(mode, sprites, records, roundness=0.5, spacing=0.4, size=1.0,
         if name in prog:
             prog[name].value = value
     prog["view_proj"].write(np.eye(4, dtype=np.float32).tobytes())
-    vao = ctx.vertex_array(prog, [(quad, "2f", "in_corner")])
-    out = ctx.buffer(reserve=len(records) * sprites * 4 * 16)
+    vao = ctx.vertex_array(prog, [])  # corners from gl_VertexID: 6 a sprite, two triangles (0 1 2) (2 1 3)
+    out = ctx.buffer(reserve=len(records) * sprites * 6 * 16)
     fbo = ctx.simple_framebuffer((1, 1))  # a draw, even with rasterization off, needs a complete framebuffer
     fbo.use()
-    vao.transform(out, mode=moderngl.POINTS, vertices=4, instances=len(records) * sprites)
-    corners = np.frombuffer(out.read(), np.float32).reshape(len(records), sprites, 4, 4)[..., :3]
-    for obj in (vao, out, fbo, tex, quad, prog):
+    vao.transform(out, mode=moderngl.POINTS, vertices=6 * len(records) * sprites)
+    corners = np.frombuffer(out.read(), np.float32).reshape(len(records), sprites, 6, 4)[..., :3]
+    for obj in (vao, out, fbo, tex, prog):
         obj.release()
-    return corners.mean(axis=2), (corners[:, :, 3, 0] - corners[:, :, 0, 0]) / 2.0  # centres, sizes
+    return corners.mean(axis=2), (corners[:, :, 5, 0] - corners[:, :, 0, 0]) / 2.0  # centres, sizes
 
 
 def _record(position, hit=(0.0, 0.0, 0.0), direction=(1.0, 0.0, 0.0), alpha=1.0):
