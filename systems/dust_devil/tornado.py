@@ -36,6 +36,37 @@ def centre_line(cz: ArrayLike, t: float, rotation: float = 0.0) -> tuple[F64, F6
     return 0.5 + ox, 0.5 + oy
 
 
+def _swirl(cx: F64, cy: F64, cz: F64, t: float, rotation: float) -> tuple[F64, F64, F64, F64]:
+    """The terms of ``gen_tornado`` at broadcastable coordinates: (s, z0, x - xc, y - yc), so that
+    v = (s (y - yc) + 0.1 (x - xc), -s (x - xc) + 0.1 (y - yc), s z0).  Per-slice terms stay the size of cz, and
+    the full-size ones are computed in place (the grid is evaluated every step)."""
+    xc, yc = centre_line(cz, t, rotation)  # terms stay the size of cz
+    r = 0.1 + 0.4 * cz * cz + 0.1 * cz * np.sin(8.0 * cz)
+    r2 = 0.2 + 0.1 * cz
+    dx, dy = cx - xc, cy - yc
+    shape = np.broadcast_shapes(dx.shape, dy.shape, cz.shape)
+    d, s, z0 = np.empty(shape), np.empty(shape), np.empty(shape)
+    np.add(dx * dx, dy * dy, out=d)
+    np.sqrt(d, out=d)
+    np.subtract(r, d, out=s)
+    np.abs(s, out=s)
+    far = s > r2
+    np.subtract(0.8, s, out=s)
+    np.copyto(s, 1.0, where=~far)  # s = 0.8 - |r - d| if |r - d| > r2 else 1: the discontinuity its author did not like
+    np.multiply(d, cz, out=z0)
+    np.subtract(0.1, z0, out=z0)
+    z0 *= 0.1
+    np.maximum(z0, 0.0, out=z0)
+    d *= d
+    d += z0 * z0
+    np.sqrt(d, out=d)  # d = sqrt(d² + z0²)
+    s *= (r + r2) - d
+    d += SMALL
+    s /= d
+    s /= 1.0 + cz
+    return s, z0, dx, dy
+
+
 def crawfis_tornado(cx: ArrayLike, cy: ArrayLike, cz: ArrayLike, t: float, rotation: float = 0.0) -> F64:
     """Crawfis' ``gen_tornado`` at points of the unit cube, time ``t``; returns (..., 3) in Crawfis axes.
 
@@ -46,17 +77,7 @@ def crawfis_tornado(cx: ArrayLike, cy: ArrayLike, cz: ArrayLike, t: float, rotat
         v  = (s (y - yc) + 0.1 (x - xc), -s (x - xc) + 0.1 (y - yc), s z0)
     """
     cx, cy, cz = (np.asarray(a, dtype=np.float64) for a in (cx, cy, cz))  # broadcast lazily: per-slice
-    xc, yc = centre_line(cz, t, rotation)  # terms stay the size of cz
-    r = 0.1 + 0.4 * cz * cz + 0.1 * cz * np.sin(8.0 * cz)
-    r2 = 0.2 + 0.1 * cz
-    dx, dy = cx - xc, cy - yc
-    d = np.sqrt(dx * dx + dy * dy)
-    s = np.abs(r - d)
-    s = np.where(s > r2, 0.8 - s, 1.0)  # the discontinuity its author did not like
-    z0 = np.maximum(0.1 * (0.1 - d * cz), 0.0)
-    d = np.sqrt(d * d + z0 * z0)
-    s = (r + r2 - d) * s / (d + SMALL)
-    s = s / (1.0 + cz)
+    s, z0, dx, dy = _swirl(cx, cy, cz, t, rotation)
     out = np.empty(np.broadcast_shapes(cx.shape, cy.shape, cz.shape) + (3,))
     out[..., 0] = s * dy + 0.1 * dx
     out[..., 1] = -s * dx + 0.1 * dy
@@ -73,17 +94,21 @@ def wind_grid(resolution: tuple[int, int, int], size: ArrayLike, t: float, rotat
               wind_scale: float) -> F64:
     """The field on the grid as field-space velocities in m/s, shape (nx, ny, nz, 3), index [ix, iy(up), iz].
 
-    Crawfis' vector (vx, vy, vz) in unit-cube lengths per time becomes (vx Sx, vz Sy, -vy Sz) · wind_scale.
+    Crawfis' vector (vx, vy, vz) in unit-cube lengths per time becomes (vx Sx, vz Sy, -vy Sz) · wind_scale,
+    written straight into the output (the same operations, in the same order, as mapping crawfis_tornado's).
     """
     ux, uy, uz = grid_points(resolution)
     # engine axes [ix, iy (up), iz] -> Crawfis (x, z, y = 1 - uz), as broadcastable 1-D axes
-    v = crawfis_tornado(ux[:, None, None], (1.0 - uz)[None, None, :], uy[None, :, None], t, rotation)
+    s, z0, dx, dy = _swirl(ux[:, None, None], (1.0 - uz)[None, None, :], uy[None, :, None], t, rotation)
     size = np.asarray(size, dtype=np.float64)
-    out = np.empty_like(v)
-    out[..., 0] = v[..., 0] * size[0]
-    out[..., 1] = v[..., 2] * size[1]
-    out[..., 2] = -v[..., 1] * size[2]
-    return out * wind_scale
+    out = np.empty(tuple(resolution) + (3,))
+    for axis, (value, scale) in enumerate([(s * dy + 0.1 * dx, size[0]),  # vx Sx
+                                           (s * z0, size[1]),  # vz Sy
+                                           (-s * dx + 0.1 * dy, -size[2])]):  # -vy Sz
+        value *= scale
+        value *= wind_scale
+        out[..., axis] = value
+    return out
 
 
 def to_unit(points: F64, size: ArrayLike) -> F64:
