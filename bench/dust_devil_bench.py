@@ -83,7 +83,11 @@ def make_app(width: int, height: int, particles: int, cameras: str, extra: str =
 
 
 def bench_render(label: str, width: int, height: int, particles: int, cameras: str, frames: int,
-                 extra: str = "") -> float:
+                 extra: str = "", passes: bool = False) -> float:
+    """Median wall-clock frame (one fixed step + render + glFinish); prints it with the best frame, the process
+    CPU time per frame (all of llvmpipe's threads: steadier than wall time on a shared machine) and the PBVR path;
+    ``passes``: then the per-pass CPU times (each pass followed by glFinish, so they add up to more than a
+    pipelined frame)."""
     from engine.render.frontend import create_headless_context
     from engine.render.renderer import Renderer
 
@@ -94,18 +98,30 @@ def bench_render(label: str, width: int, height: int, particles: int, cameras: s
         app.step(1)
         app.render_frame()
     renderer.ctx.finish()
-    times, sims = [], []
+    times, sims, cpus = [], [], []
     for _ in range(frames):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         app.step(1)
         t1 = time.perf_counter()
         app.render_frame()
         renderer.ctx.finish()
         times.append(time.perf_counter() - t0)
+        cpus.append(time.process_time() - c0)
         sims.append(t1 - t0)
     frame = statistics.median(times)
-    print(f"  {label:<50s} {1.0 / frame:6.1f} fps   (median frame {1e3 * frame:6.1f} ms, of which simulation "
-          f"{1e3 * statistics.median(sims):4.1f} ms)")
+    feature = next(f for f in renderer.features if f.name == "dust_devil")
+    path = {True: "scatter", False: "slab", None: "-"}[feature.scatter] if "pbvr = false" not in extra else "-"
+    print(f"  {label:<50s} {1.0 / frame:6.1f} fps   (median frame {1e3 * frame:6.1f} ms, best {1e3 * min(times):6.1f}, "
+          f"CPU {1e3 * statistics.median(cpus):6.1f} ms/frame, simulation {1e3 * statistics.median(sims):4.1f} ms; "
+          f"PBVR {path})")
+    if passes:
+        renderer.timer.enabled, renderer.timer.gpu = True, False
+        renderer.timer.totals.clear()
+        renderer.timer.frames = 0
+        for _ in range(min(frames, 20)):
+            app.step(1)
+            app.render_frame()
+        print("    " + renderer.timer.report().replace("\n", "\n    "))
     renderer.release()
     return frame
 
@@ -122,6 +138,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--frames", type=int, default=60)
     parser.add_argument("--skip-render", action="store_true")
+    parser.add_argument("--passes", action="store_true", help="per-pass CPU times of the one-view workload")
     args = parser.parse_args()
     import os
 
@@ -134,7 +151,7 @@ def main() -> int:
         print(f"GL: {ctx.info['GL_RENDERER']}")
         ctx.release()
         print("paper's workload: 64 x 64 terrain polygons, 5000 particles x 2 pseudo-particles, 16 repeats:")
-        frame = bench_render("640 x 480, one view", 640, 480, 5000, ONE_VIEW, args.frames)
+        frame = bench_render("640 x 480, one view", 640, 480, 5000, ONE_VIEW, args.frames, passes=args.passes)
         print(f"  {'paper (Xeon 2.53 GHz, 2012)':<50s} {'13-17':>6s} fps   (here {1 / frame / 15.0:.2f}x the "
               "paper's mid-range; target >= 60 fps)")
         bench_render("two 640 x 480 views (top + oblique), 1280 x 480", 1280, 480, 5000, TWO_VIEWS, args.frames)
@@ -144,7 +161,7 @@ def main() -> int:
                            "pbvr = false")
         print(f"  PBVR cost (frame - frame with PBVR off): R = 16 {1e3 * (frame - off):5.1f} ms, "
               f"R = 4 {1e3 * (drag - off):5.1f} ms = {1e6 * (frame - off) / (5000 * 2 * 16):.2f} us per "
-              "pseudo-particle point")
+              "pseudo-particle")
     print("simulation step (numpy, one fixed step, terrain on):")
     for label, extra in [("nearest + midpoint (default)", ""), ("nearest + euler (paper's step)", 'integrator = "euler"'),
                          ("trilinear + midpoint", 'lookup = "trilinear"')]:
