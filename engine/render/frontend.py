@@ -169,7 +169,7 @@ def _run_window(app: App, size, steps, every, last, profile: bool) -> None:
 def attach_window_input(window, queue: InputQueue, renderer: Renderer, reloader=None) -> None:
     """Translate pyglet events into engine InputEvents (pyglet's y axis points up, as the engine's).
 
-    F3 toggles the profiler overlay and F5 forces a config reload; both are front-end actions, not
+    F3 toggles the profiler overlay and F5 forces a config and shader reload; both are front-end actions, not
     game input, but they are still passed on so that game scripts may react.
     """
 
@@ -178,8 +178,11 @@ def attach_window_input(window, queue: InputQueue, renderer: Renderer, reloader=
         if name == "f3":
             renderer.show_profiler = not renderer.show_profiler
             renderer.timer.enabled = renderer.show_profiler or renderer.timer.enabled
-        if name == "f5" and reloader is not None:
-            reloader.reload()
+        if name == "f5":
+            for error in renderer.reload_shaders():
+                print(f"shader reload: {error}", flush=True)
+            if reloader is not None:
+                reloader.reload()
         queue.push(InputEvent("key_down", name))
         return True  # swallow Escape: games use it for pause; the close button quits
 

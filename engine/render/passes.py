@@ -6,6 +6,7 @@ height field and drawn chunk by chunk at a level of detail per view (engine/rend
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import TYPE_CHECKING, Any
@@ -393,9 +394,20 @@ class HudFeature(RenderFeature):
     name = "hud"
     phase = OVERLAY
 
+    FPS_REFRESH_SECONDS = 0.25  # the FPS readout changes at most 4 times a second (readable; no text re-render per frame)
+
     def __init__(self, renderer: Renderer) -> None:
         super().__init__(renderer)
         self._textures: dict[tuple, moderngl.Texture] = {}
+        self._vao: moderngl.VertexArray | None = None
+        self._fps_text, self._fps_time = "FPS   --", -1e9
+
+    def _fps_line(self) -> str:
+        now = time.perf_counter()
+        if now - self._fps_time >= self.FPS_REFRESH_SECONDS:
+            fps = self.renderer.fps
+            self._fps_text, self._fps_time = (f"FPS {fps:5.1f}" if fps else "FPS   --"), now
+        return self._fps_text
 
     def extract(self, world) -> list[tuple]:
         items: list[tuple] = []
@@ -403,7 +415,7 @@ class HudFeature(RenderFeature):
         if hud is not None:
             lines = list(hud.lines)
             if hud.show_fps:
-                lines.append(f"FPS {self.renderer.fps:5.1f}" if self.renderer.fps else "FPS   --")
+                lines.append(self._fps_line())
             if lines:
                 items.append(("top_left", tuple(lines), 16))
             if hud.center:
@@ -449,8 +461,9 @@ class HudFeature(RenderFeature):
             self.ctx.disable(moderngl.DEPTH_TEST)
             self.ctx.enable(moderngl.BLEND)
             self.ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
-            prog = r.program((SHADERS / "sprite.vert").read_text(), (SHADERS / "sprite.frag").read_text())
-            vao = r.__dict__.setdefault("_sprite_vao", self.ctx.vertex_array(prog, []))
+            if self._vao is None:
+                self._vao = self.ctx.vertex_array(r.load_program(SHADERS, "sprite"), [])
+            vao, prog = self._vao, self._vao.program
             for where, lines, size, *color in data:
                 tex = self._texture(lines, size, *color)
                 w, h = tex.size
@@ -466,6 +479,9 @@ class HudFeature(RenderFeature):
         for tex in self._textures.values():
             tex.release()
         self._textures.clear()
+        if self._vao is not None:
+            self._vao.release()
+            self._vao = None
 
 
 def _reload_status():

@@ -109,6 +109,7 @@ class Renderer:
         self.sun_color = np.array(self.settings.sun_color, np.float32)
         self.ambient = float(self.settings.ambient)
         self._programs: dict[tuple, moderngl.Program] = {}
+        self._loaded: dict[tuple[str, str], moderngl.Program] = {}
         self._framebuffers: dict[tuple, moderngl.Framebuffer] = {}
         self.quad_buffer = ctx.buffer(np.array([-1, -1, 1, -1, -1, 1, 1, 1], np.float32).tobytes())
         self.graph = RenderGraph(ResourcePool(self._make_resource, self._free_resource))
@@ -140,14 +141,36 @@ class Renderer:
         return prog
 
     def load_program(self, directory: str | Path, name: str) -> moderngl.Program:
-        """``name.vert`` + ``name.frag`` (+ ``name.geom``) from ``directory``, compiled once."""
+        """``name.vert`` + ``name.frag`` (+ ``name.geom``) from ``directory``, read and compiled once (passes call
+        this every frame: no file reads after the first); :meth:`reload_shaders` picks up edited files."""
+        key = (str(directory), name)
+        prog = self._loaded.get(key)
+        if prog is not None:
+            return prog
         directory = Path(directory)
         geom = directory / f"{name}.geom"
         try:
-            return self.program(shader_source(directory / f"{name}.vert"), shader_source(directory / f"{name}.frag"),
+            prog = self.program(shader_source(directory / f"{name}.vert"), shader_source(directory / f"{name}.frag"),
                                 shader_source(geom) if geom.exists() else None)
         except moderngl.Error as exc:
             raise RuntimeError(f"shader '{name}' in {directory} failed to compile:\n{exc}") from None
+        self._loaded[key] = prog
+        return prog
+
+    def reload_shaders(self) -> list[str]:
+        """Re-read every shader loaded by name; a file that no longer compiles keeps its last good program.
+
+        Returns the compile errors (empty when all compiled).  F5 in the window calls this with the config reload.
+        """
+        errors = []
+        for directory, name in list(self._loaded):
+            old = self._loaded.pop((directory, name))
+            try:
+                self.load_program(directory, name)
+            except (RuntimeError, OSError) as exc:
+                self._loaded[(directory, name)] = old
+                errors.append(str(exc))
+        return errors
 
     def framebuffer(self, color: moderngl.Texture | list | None, depth: moderngl.Texture | None = None
                     ) -> moderngl.Framebuffer:
@@ -340,6 +363,7 @@ class Renderer:
         for prog in self._programs.values():
             prog.release()
         self._programs.clear()
+        self._loaded.clear()
 
 
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.M)

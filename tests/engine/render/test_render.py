@@ -127,3 +127,48 @@ def test_render_scale_tone_maps_at_view_size_then_upscales():
         assert ("tonemap.view0" in order) == (scale < 1.0)
         assert "present.view0" in order
     assert np.abs(images[1.0] - images[0.5]).mean() < 3.0  # 0.8 measured; an untoned or unscaled view is far off
+
+
+def test_hud_reuses_its_vertex_array_and_refreshes_the_fps_text_four_times_a_second(monkeypatch):
+    from engine.render import passes
+
+    app = App(SCENE)
+    renderer = make_renderer(app, 96, 64)
+    hud = next(f for f in renderer.features if isinstance(f, passes.HudFeature))
+    app.world.resource(Hud).show_fps = True
+    app.render_frame()
+    vao = hud._vao
+    app.render_frame()
+    assert vao is not None and hud._vao is vao
+    clock = {"t": passes.time.perf_counter() + 1000.0}
+    monkeypatch.setattr(passes.time, "perf_counter", lambda: clock["t"])
+    renderer.fps = 20.0
+    first = hud._fps_line()
+    renderer.fps = 50.0
+    clock["t"] += 0.1
+    assert hud._fps_line() == first == "FPS  20.0"
+    clock["t"] += 0.2
+    assert hud._fps_line() == "FPS  50.0"
+    renderer.release()
+    app.renderer = None
+
+
+def test_reload_shaders_picks_up_edits_and_keeps_the_last_good_program(tmp_path):
+    vert = "#version 330\nin vec2 p;\nvoid main() { gl_Position = vec4(p, 0.0, 1.0); }\n"
+    frag = "#version 330\nout vec4 c;\nvoid main() { c = vec4(%s); }\n"
+    (tmp_path / "flat.vert").write_text(vert)
+    (tmp_path / "flat.frag").write_text(frag % "1.0")
+    app = App(SCENE)
+    renderer = make_renderer(app, 32, 32)
+    first = renderer.load_program(tmp_path, "flat")
+    assert renderer.load_program(tmp_path, "flat") is first  # cached: no re-read
+    (tmp_path / "flat.frag").write_text(frag % "0.5")
+    assert renderer.reload_shaders() == []
+    edited = renderer.load_program(tmp_path, "flat")
+    assert edited is not first
+    (tmp_path / "flat.frag").write_text(frag % "this is not glsl")
+    errors = renderer.reload_shaders()
+    assert len(errors) == 1 and "flat" in errors[0]
+    assert renderer.load_program(tmp_path, "flat") is edited
+    renderer.release()
+    app.renderer = None
