@@ -16,6 +16,11 @@ F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
 
 BOX, SPHERE = 0, 1
+
+# Reductions as ufunc methods: ndarray.all() / .sum() and np.any() / np.cumsum() pass through Python wrappers that
+# cost more than the work itself on the small arrays of a step. Whole-array reductions need axis=None.
+all_of, any_of = np.logical_and.reduce, np.logical_or.reduce
+sum_of, min_of, max_of = np.add.reduce, np.minimum.reduce, np.maximum.reduce
 EPS_LINE = 1e-7  # grid units: closer than this to a grid line counts as "on" it
 NUDGE = 1e-4  # grid units: how far a point on a grid line is moved inwards (figure 2.3)
 
@@ -161,7 +166,7 @@ def polygon_area(polygons: F64, counts: I64) -> F64:
 
 def ranges(lo: I64, count: I64) -> tuple[I64, I64]:
     """For runs r with ``count[r]`` members starting at ``lo[r]``: (run index, value) of every member, flattened."""
-    total = int(count.sum())
-    run = np.repeat(np.arange(len(count)), count)
-    starts = np.cumsum(count) - count
-    return run, lo[run] + (np.arange(total) - starts[run])
+    ends = np.add.accumulate(count)
+    total = int(ends[-1]) if len(ends) else 0
+    run = np.arange(len(count)).repeat(count)
+    return run, (lo - ends + count).repeat(count) + np.arange(total)

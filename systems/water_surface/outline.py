@@ -20,7 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from systems.water_surface.geometry import BOX, EPS_LINE, F64, I64, NUDGE, Bodies, Grid, ranges
+from systems.water_surface.geometry import (BOX, EPS_LINE, F64, I64, NUDGE, Bodies, Grid, all_of, any_of, max_of,
+                                            min_of, ranges, sum_of)
 
 __all__ = ["AddedPoints", "Edges", "Sections", "added_points", "coupling_pairs", "cross_sections",
            "nearest_on_outline", "nudge", "outline_impulse", "solid_vertices"]
@@ -56,12 +57,14 @@ _HALF_CELLS = np.array([(0, 0), (1, 0), (-1, 1), (0, 1), (1, 1)], np.int64)  # t
 @dataclass
 class Edges:
     """The edges k → k + 1 of padded polygons (B, V): start, direction, and the inward half-plane of each
-    (n·p > c inside; padding edges have n = 0, c = −∞ so every point is inside them). Points are (…, 2) arrays,
-    so one numpy call handles both coordinates."""
+    (n·p > c inside; padding edges have n = 0, c = −∞ so every point is inside them).
 
-    start: F64  # (B, V, 2)
-    e: F64  # (B, V, 2) end − start
-    n: F64  # (B, V, 2) inward unit normal (0 on padding and zero-length edges)
+    Vectors are stored coordinate-major, (2, B, V): one numpy call handles both coordinates, and the innermost
+    axis stays long (V) when they are broadcast against many points (a trailing axis of 2 is slow)."""
+
+    start: F64  # (2, B, V)
+    e: F64  # (2, B, V) end − start
+    n: F64  # (2, B, V) inward unit normal (0 on padding and zero-length edges)
     c: F64  # (B, V)
     valid: np.ndarray  # (B, V)
     length2: F64  # (B, V) |e|², 1 where it is 0 (a safe divisor)
@@ -72,28 +75,29 @@ class Edges:
         k = np.arange(v)
         valid = k < counts[:, None]
         nxt = np.where(k + 1 < counts[:, None], k + 1, 0)
-        e = polygons[np.arange(b)[:, None], nxt] - polygons
+        start = np.ascontiguousarray(polygons.transpose(2, 0, 1))
+        e = start[:, np.arange(b)[:, None], nxt] - start
         ee = e * e
-        length2 = ee[..., 0] + ee[..., 1]
-        length = np.hypot(e[..., 0], e[..., 1])
+        length2 = ee[0] + ee[1]
+        length = np.hypot(e[0], e[1])
         real = valid & (length > 0.0)
         inv = np.where(real, 1.0 / np.where(real, length, 1.0), 0.0)
-        n = e[..., ::-1] * (inv[..., None] * _FLIP)  # (−e_y, e_x) / |e|: the inward (left) normal
-        np_ = n * polygons
-        c = np.where(real, np_[..., 0] + np_[..., 1], -np.inf)
-        return Edges(polygons, e, n, c, valid, np.where(length2 > 0.0, length2, 1.0))
+        n = e[::-1] * (inv * _FLIP)  # (−e_y, e_x) / |e|: the inward (left) normal
+        ns = n * start
+        c = np.where(real, ns[0] + ns[1], -np.inf)
+        return Edges(start, e, n, c, valid, np.where(length2 > 0.0, length2, 1.0))
 
     def inside(self, points: F64, body: I64, margin: float) -> np.ndarray:
         """Whether ``points[p]`` lies inside polygon ``body[p]`` by more than ``margin`` (negative: on or near the
         outline counts too). Polygons with fewer than 3 vertices contain nothing."""
         if len(points) == 0:
             return np.zeros(0, bool)
-        d = _per_point(self.n, body) * points[:, None, :]
-        inside = ((d[..., 0] + d[..., 1] - _per_point(self.c, body)) > margin).all(axis=1)
+        d = _per_point(self.n[0], body) * points[:, :1] + _per_point(self.n[1], body) * points[:, 1:]
+        inside = all_of((d - _per_point(self.c, body)) > margin, axis=1)
         return inside & self.valid[body, 2]
 
 
-_FLIP = np.array([-1.0, 1.0])
+_FLIP = np.array([-1.0, 1.0])[:, None, None]
 
 
 @dataclass
@@ -124,7 +128,7 @@ def cross_sections(bodies: Bodies, plane_y: F64, grid: Grid, sphere_segments: in
     """Cross-section polygon D' of every body with the horizontal plane y = plane_y[b] (section 2.2.2)."""
     n = len(bodies)
     is_box = bodies.shapes == BOX
-    boxes, spheres = bool(is_box.any()), not bool(is_box.all())
+    boxes, spheres = bool(any_of(is_box, axis=None)), not bool(all_of(is_box, axis=None))
     width = max(_MAX_BOX_VERTICES if boxes else 0, sphere_segments if spheres else 0, 3)
     if boxes and not spheres and width == _MAX_BOX_VERTICES:  # the common case: only boxes
         p, c, f = _box_sections(bodies, plane_y, grid)
@@ -166,14 +170,14 @@ def _box_sections(bodies: Bodies, plane_y: F64, grid: Grid) -> tuple[F64, I64, I
     t = ya / np.where(straddle, ya - y[..., 1], 1.0)  # L = Q + t·(R − Q) on the plane
     q, r = ends[:, :, 0, ::2], ends[:, :, 1, ::2]
     points = grid.to_uv(q + t[..., None] * (r - q))
-    return _sort_ccw(points, straddle, exact=bool((y == 0.0).any()))
+    return _sort_ccw(points, straddle, exact=bool(any_of(y == 0.0, axis=None)))
 
 
 def _sort_ccw(points: F64, valid: np.ndarray, exact: bool) -> tuple[F64, I64, I64]:
     """The valid points of each row counter-clockwise about their centroid (first 6 columns), their count and
     the column each came from; with ``exact`` (a box corner on the plane) repeated points are dropped."""
-    n = valid.sum(axis=1)
-    centre = np.where(valid[..., None], points, 0.0).sum(axis=1) / np.maximum(n, 1)[:, None]
+    n = sum_of(valid, axis=1, dtype=np.int64)
+    centre = sum_of(np.where(valid[..., None], points, 0.0), axis=1) / np.maximum(n, 1)[:, None]
     d = points - centre[:, None, :]
     angle = np.where(valid, np.arctan2(d[..., 1], d[..., 0]), np.inf)
     order = angle.argsort(axis=1, kind="stable")[:, :_MAX_BOX_VERTICES]
@@ -205,15 +209,15 @@ def nudge(sections: Sections) -> Sections:
     an added point never sits on a grid vertex and a vertex on a grid edge adds no extra point."""
     p = sections.polygons
     valid = (np.arange(p.shape[1]) < sections.counts[:, None])[..., None]
-    on = (np.abs(p - np.round(p)) < EPS_LINE) & valid
-    if not on.any():
+    on = (np.abs(p - np.rint(p)) < EPS_LINE) & valid
+    if not any_of(on, axis=None):
         return sections
     centre = sections.centres()[:, None, :]
     towards = centre - p
     length = np.linalg.norm(towards, axis=-1, keepdims=True)
     p = np.where(on.any(axis=-1, keepdims=True), p + NUDGE * towards / np.where(length > 0.0, length, 1.0), p)
-    on = (np.abs(p - np.round(p)) < EPS_LINE) & valid
-    if on.any():  # moving towards the centre ran along the line: step off it towards the centre's side
+    on = (np.abs(p - np.rint(p)) < EPS_LINE) & valid
+    if any_of(on, axis=None):  # moving towards the centre ran along the line: step off it towards the centre's side
         p = np.where(on, p + NUDGE * np.where(centre - p >= 0.0, 1.0, -1.0), p)
     return sections.with_polygons(p)
 
@@ -267,8 +271,8 @@ def added_points(sections: Sections, entities: I64, grid: Grid) -> tuple[AddedPo
         np.not_equal(body[1:], body[:-1], out=change[1:n])
         last = change[1:]
         nxt[last] = np.flatnonzero(change[:n])
-    keep = ((uv >= 0.0) & (uv <= (grid.nx - 1, grid.nz - 1))).all(axis=1)  # on the grid's footprint
-    if keep.all():
+    keep = all_of((uv >= 0.0) & (uv <= (grid.nx - 1, grid.nz - 1)), axis=1)  # on the grid's footprint
+    if all_of(keep, axis=None):
         segments = np.empty((n, 2), np.int64)
         segments[:, 0] = np.arange(n)
         segments[:, 1] = nxt
@@ -288,22 +292,24 @@ def _outline(sections: Sections, strict: bool):
     lines (u = i: axis 0, v = j: axis 1) are handled in one pass over the (edge, axis) pairs."""
     e = sections.edges
     eb, ek = e.valid.nonzero()
-    a, d = e.start[eb, ek], e.e[eb, ek]  # (E, 2)
+    a, d = e.start[:, eb, ek], e.e[:, eb, ek]  # (2, E): row 0 u, row 1 v
+    n = len(eb)
     base = (eb * sections.polygons.shape[1] + ek).astype(np.float64) * 2.0  # edge index; t ∈ (0, 1) after it
     b = a + d
     lo = np.floor(np.minimum(a, b)).astype(np.int64)
     hi = np.floor(np.maximum(a, b)).astype(np.int64)
-    run, line = ranges((lo + 1).ravel(), (hi - lo).ravel())  # run = 2·edge + axis
-    edge, axis = run >> 1, run & 1
+    run, line = ranges((lo + 1).ravel(), (hi - lo).ravel())  # run = axis·E + edge
+    axis, edge = np.divmod(run, max(n, 1))
     af, df = a.ravel(), d.ravel()
     t = (line - af[run]) / df[run]
-    other = af[run ^ 1] + t * df[run ^ 1]
-    if strict and ((np.abs(other - np.rint(other)) < EPS_LINE) & (axis == 0)).any():
+    across = run + np.where(axis == 0, n, -n)  # the same edge, the other coordinate
+    other = af[across] + t * df[across]
+    if strict and any_of((np.abs(other - np.rint(other)) < EPS_LINE) & (axis == 0), axis=None):
         return None
     on_u = axis == 0
-    n, m = len(eb), len(run)
+    m = len(run)
     uv = np.empty((n + m, 2))
-    uv[:n] = a
+    uv[:n] = a.T
     uv[n:, 0] = np.where(on_u, line, other)
     uv[n:, 1] = np.where(on_u, other, line)
     kind = np.empty(n + m, np.int8)
@@ -334,7 +340,7 @@ def outline_impulse(points: AddedPoints, sections: Sections, previous: Sections,
         return empty, empty, np.zeros(0, bool), np.zeros(0, bool)
     bi = points.body
     old = (has_previous & (previous.counts >= 3))[bi]
-    every = bool(old.all())
+    every = bool(all_of(old, axis=None))
     back = nearest_on_outline(points.uv, bi, previous.edges)
     if not every:
         back = np.where(old[:, None], back, points.uv)
@@ -351,28 +357,36 @@ def outline_impulse(points: AddedPoints, sections: Sections, previous: Sections,
     return change - mean[bi], d, raised, lowered
 
 
-def _per_point(values: np.ndarray, body: I64) -> np.ndarray:
-    """``values[body]``, or ``values`` itself when there is one body (it broadcasts: no copy)."""
-    return values if len(values) == 1 else values[body]
+def _per_point(values: np.ndarray, body: I64, axis: int = 0) -> np.ndarray:
+    """``values`` taken at ``body`` along ``axis``, or ``values`` itself when there is one body (it broadcasts)."""
+    if values.shape[axis] == 1:
+        return values
+    return values[body] if axis == 0 else values[:, body]
 
 
 def nearest_on_outline(points: F64, body: I64, edges: Edges) -> F64:
-    """The point of polygon ``body[p]``'s outline nearest to ``points[p]``."""
-    a, e = _per_point(edges.start, body), _per_point(edges.e, body)  # (P, V, 2)
-    r = points[:, None, :] - a
-    re = r * e
-    t = np.minimum(np.maximum((re[..., 0] + re[..., 1]) / _per_point(edges.length2, body), 0.0), 1.0)
-    foot = a + t[..., None] * e
-    gap = foot - points[:, None, :]
-    gap *= gap
-    dist2 = np.where(_per_point(edges.valid, body), gap[..., 0] + gap[..., 1], np.inf)
-    return foot[np.arange(len(points)), np.argmin(dist2, axis=1)]
+    """The point of polygon ``body[p]``'s outline nearest to ``points[p]``.
+
+    Coordinates are handled one at a time: the (P, V) arrays stay small (under the allocator's threshold for
+    fresh memory maps, which a (2, P, V) array of a few hundred points would cross)."""
+    ax, ay = _per_point(edges.start[0], body), _per_point(edges.start[1], body)
+    ex, ey = _per_point(edges.e[0], body), _per_point(edges.e[1], body)
+    px, py = points[:, :1], points[:, 1:]
+    t = np.minimum(np.maximum(((px - ax) * ex + (py - ay) * ey) / _per_point(edges.length2, body), 0.0), 1.0)
+    fx, fy = ax + t * ex, ay + t * ey
+    dx, dy = fx - px, fy - py
+    dist2 = np.where(_per_point(edges.valid, body), dx * dx + dy * dy, np.inf)
+    rows, best = np.arange(len(points)), dist2.argmin(axis=1)
+    out = np.empty((len(points), 2))
+    out[:, 0], out[:, 1] = fx[rows, best], fy[rows, best]
+    return out
 
 
 # ------------------------------------------------------------------------------------------- coupling
 def solid_vertices(sections: Sections, grid: Grid) -> tuple[I64, I64]:
-    """Grid vertices strictly inside some cross-section: (flat vertex index, body index). In the outline method
-    they are inside the body, so the water there is not simulated and waves reflect at the outline.
+    """Grid vertices strictly inside some cross-section: (flat vertex index, body index), by body, row and column.
+    In the outline method they are inside the body, so the water there is not simulated and waves reflect at the
+    outline.
 
     Scanline fill: every grid row v = j through a polygon meets its outline at two points (it is convex, and its
     vertices are off the grid lines); the vertices strictly between them are inside.
@@ -380,23 +394,22 @@ def solid_vertices(sections: Sections, grid: Grid) -> tuple[I64, I64]:
     e = sections.edges
     v = sections.polygons[..., 1]
     cut = sections.counts >= 3
-    lo = np.where(cut, np.maximum(np.ceil(np.where(e.valid, v, np.inf).min(axis=1)), 0), 0).astype(np.int64)
-    hi = np.where(cut, np.minimum(np.floor(np.where(e.valid, v, -np.inf).max(axis=1)), grid.nz - 1),
+    lo = np.where(cut, np.maximum(np.ceil(min_of(np.where(e.valid, v, np.inf), axis=1)), 0), 0).astype(np.int64)
+    hi = np.where(cut, np.minimum(np.floor(max_of(np.where(e.valid, v, -np.inf), axis=1)), grid.nz - 1),
                   -1).astype(np.int64)
     body, row = ranges(lo, np.maximum(hi - lo + 1, 0))
     if len(body) == 0:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    a, d = _per_point(e.start, body), _per_point(e.e, body)  # (R, V, 2)
-    ay, ey = a[..., 1], d[..., 1]
-    flat = ey != 0.0
-    t = (row[:, None] - ay) / np.where(flat, ey, np.inf)
-    u = a[..., 0] + t * d[..., 0]
+        return body, body
+    a, d = _per_point(e.start, body, 1), _per_point(e.e, body, 1)  # (2, R, V)
+    flat = d[1] != 0.0
+    t = (row[:, None] - a[1]) / np.where(flat, d[1], np.inf)
+    u = a[0] + t * d[0]
     crosses = (t >= 0.0) & (t < 1.0) & (flat & _per_point(e.valid, body))
-    left = np.where(crosses, u, np.inf).min(axis=1)
-    right = np.where(crosses, u, -np.inf).max(axis=1)
+    left = min_of(np.where(crosses, u, np.inf), axis=1)
+    right = max_of(np.where(crosses, u, -np.inf), axis=1)
     ok = (left < np.inf) & (right > -np.inf)
-    first = np.where(ok, np.maximum(np.floor(left + 1e-9).astype(np.int64) + 1, 0), 0)
-    last = np.where(ok, np.minimum(np.ceil(right - 1e-9).astype(np.int64) - 1, grid.nx - 1), -1)
+    first = np.where(ok, np.maximum(np.floor(np.where(ok, left, 0.0) + 1e-9) + 1, 0), 0).astype(np.int64)
+    last = np.where(ok, np.minimum(np.ceil(np.where(ok, right, 0.0) - 1e-9) - 1, grid.nx - 1), -1).astype(np.int64)
     run, i = ranges(first, np.maximum(last - first + 1, 0))
     return row[run] * grid.nx + i, body[run]
 
@@ -433,7 +446,7 @@ def coupling_pairs(points: AddedPoints, fluid: np.ndarray, grid: Grid,
         ok &= ~fluid.ravel()[flat]
     else:
         ok &= fluid.ravel()[flat]
-    p_idx, c_idx = np.nonzero(ok)
+    p_idx, c_idx = ok.nonzero()
     g = flat[p_idx, c_idx]
     w = 1.0 - dist[p_idx, c_idx]
     if m <= _DENSE_PAIRS:
@@ -441,11 +454,11 @@ def coupling_pairs(points: AddedPoints, fluid: np.ndarray, grid: Grid,
         dd = np.hypot(diff[..., 0], diff[..., 1])
         close = dd < 1.0
         np.fill_diagonal(close, False)
-        a, b = np.nonzero(close)
+        a, b = close.nonzero()
         return g, p_idx, w, a, b, 1.0 - dd[a, b]
     stride = grid.nx + 3
     cell = (base[:, 1] + 1) * stride + base[:, 0] + 1
-    order = np.argsort(cell, kind="stable")
+    order = cell.argsort(kind="stable")
     sorted_cell = cell[order]
     wanted = (cell[:, None] + _HALF_CELLS[:, 1] * stride + _HALF_CELLS[:, 0]).ravel()
     lo = np.searchsorted(sorted_cell, wanted, "left")

@@ -15,7 +15,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from components.water_surface import WaterState, WaterSurface
-from systems.water_surface.geometry import F64, I64, Bodies, Grid, bilinear, bilinear_fields, ranges
+from systems.water_surface.geometry import (F64, I64, Bodies, Grid, all_of, any_of, bilinear, bilinear_fields, ranges,
+                                            sum_of)
 from systems.water_surface.grid_source import column_depths
 from systems.water_surface.outline import (AddedPoints, Sections, added_points, coupling_pairs, cross_sections,
                                            nudge, outline_impulse, solid_vertices)
@@ -49,11 +50,12 @@ def plane_levels(z: F64, solid: np.ndarray, bodies: Bodies, grid: Grid) -> F64:
     hi = np.minimum(np.floor(centre + half), (grid.nx - 1, grid.nz - 1)).astype(np.int64)
     size = np.maximum(hi - lo + 1, 0)
     if len(bodies) <= _LOOP_BODIES:  # a few bodies: one slice mean each
-        levels = bilinear(z, centre)
-        for b in np.flatnonzero(size.all(axis=1)):
+        empty = ~all_of(size, axis=1)
+        levels = bilinear(z, centre) if any_of(empty, axis=None) else np.empty(len(bodies))
+        for b in (~empty).nonzero()[0]:
             window = (slice(lo[b, 1], hi[b, 1] + 1), slice(lo[b, 0], hi[b, 0] + 1))
-            water = ~solid[window]
-            levels[b] = z[window][water].mean() if water.any() else z[window].mean()
+            water = z[window][~solid[window]]
+            levels[b] = water.mean() if len(water) else z[window].mean()
         return levels
     count = size[:, 0] * size[:, 1]  # many: every window vertex at once, summed per body
     body, offset = ranges(np.zeros(len(bodies), np.int64), count)
@@ -80,7 +82,7 @@ def _water_mean(field: F64, solid: I64 | None) -> float:
     """Mean height of the vertices that are water (all but the flat indices ``solid``)."""
     if solid is None:
         return float(field.mean())
-    return float((field.sum() - field.ravel()[solid].sum()) / (field.size - len(solid)))
+    return float((sum_of(field, axis=None) - sum_of(field.ravel()[solid])) / (field.size - len(solid)))
 
 
 def _solid_index(state: WaterState) -> I64 | None:
@@ -99,13 +101,13 @@ def _near(bodies: Bodies, grid: Grid, state: WaterState, depth: float) -> np.nda
     extent = bodies.extent()
     centre = grid.to_uv(bodies.position[:, ::2])
     half = extent[:, ::2] / grid.h
-    over = ((centre + half >= 0.0) & (centre - half <= (grid.nx - 1, grid.nz - 1))).all(axis=1)
+    over = all_of((centre + half >= 0.0) & (centre - half <= (grid.nx - 1, grid.nz - 1)), axis=1)
     vertical, y = extent[:, 1], bodies.position[:, 1]
     low = y - 2.0 * vertical
     near = over & (y + vertical >= grid.y0 - depth)
     # y − 2·half ≤ (max height) + y0: any one height bounds the maximum from below, so it settles most bodies
     sure = low <= (float(state.heights.flat[0]) + grid.y0) + 1e-9
-    if not sure[near].all():
+    if not all_of(sure[near], axis=None):
         near &= low <= (float(np.max(state.heights)) + grid.y0) + 1e-9
     return near
 
@@ -183,7 +185,7 @@ def step_water(state: WaterState, cfg: WaterSurface, grid: Grid, bodies: Bodies,
     z, zp = state.heights, state.previous
     if len(bodies):
         near = _near(bodies, grid, state, cfg.depth)
-        if not near.all():
+        if not all_of(near, axis=None):
             bodies = bodies.take(near)
     levels = plane_levels(z, state.solid, bodies, grid)
     plane_y = grid.y0 + levels

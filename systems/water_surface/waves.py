@@ -75,7 +75,7 @@ _DENSE_GRID = 1 << 14  # up to this many vertices, the touched vertices are gath
 def _gather_touched(index: I64, size: int, *values: F64) -> tuple:
     """The distinct vertices in ``index`` and each of ``values`` summed per vertex."""
     if size <= _DENSE_GRID:
-        touched = np.flatnonzero(np.bincount(index, minlength=size))
+        touched = np.bincount(index, minlength=size).nonzero()[0]
         return (touched, *(np.bincount(index, v, size)[touched] for v in values))
     touched, inverse = np.unique(index, return_inverse=True)
     return (touched, *(np.bincount(inverse, v, len(touched)) for v in values))
@@ -100,8 +100,8 @@ def propagate(z: F64, zp: F64, k: float, coefficient: F64, degree: F64, solid: I
         nb = neighbour_table(nz, nx)[solid]
         real = nb >= 0
         index.append(nb[real])
-        ds.append(-np.repeat(zf[solid], 4)[real.ravel()])
-        dd.append(-real[real].astype(np.float64))
+        ds.append(-zf[solid].repeat(4)[real.ravel()])
+        dd.append(np.full(len(index[-1]), -1.0))
     has_points = points is not None and len(points) > 0
     if has_points:
         g, p, w, n1, n2, w2 = pairs
