@@ -89,23 +89,27 @@ def coverage_words(repeats: int) -> int:
 
 
 def screen_rect(positions: np.ndarray, view_proj: np.ndarray, width: int, height: int, radius: float,
-                point_size: float) -> tuple[int, int, int, int] | None:
-    """Pixels (x, y, w, h) that pseudo-particles within ``radius`` of ``positions`` can cover: the projection of
-    the cloud's bounding box grown by ``radius`` (a convex set, so its image lies in the hull of the 8 corners'
-    images), grown by half a point and a pixel.  The whole view when a corner is behind the camera; None when
-    the box is off screen."""
+                 point_size: float) -> tuple[int, int, int, int] | None:
+    """Pixels (x, y, w, h) that pseudo-particles within ``radius`` of ``positions`` can cover, or None when none
+    is on screen; the whole view when a ball reaches the camera plane.
+
+    A point p + d with |d| <= radius projects within (radius (|row_x| + |x/w| |row_w|)) / (w - radius |row_w|)
+    of p's NDC x (row_x, row_w: the xyz parts of view_proj's rows), likewise for y; grown by half a point and a
+    pixel for the points' squares and rounding."""
     if not len(positions):
         return None
-    lo, hi = positions.min(axis=0) - radius, positions.max(axis=0) + radius
-    corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-    clip = corners @ view_proj.astype(np.float64).T
-    if (clip[:, 3] <= 1e-6).any():
+    m = view_proj.astype(np.float64)
+    clip = positions.astype(np.float64) @ m[:, :3].T + m[:, 3]
+    reach_w = radius * np.linalg.norm(m[3, :3])
+    near = clip[:, 3] - reach_w
+    if (near <= 1e-9).any():
         return 0, 0, width, height
     ndc = clip[:, :2] / clip[:, 3:]
+    margin = (radius * np.linalg.norm(m[:2, :3], axis=1) + np.abs(ndc) * reach_w) / near[:, None]
     size = np.array([width, height], np.float64)
-    margin = 0.5 * point_size + 1.0
-    first = np.floor((ndc.min(axis=0) * 0.5 + 0.5) * size - margin).clip(0, size).astype(int)
-    last = np.ceil((ndc.max(axis=0) * 0.5 + 0.5) * size + margin).clip(0, size).astype(int)
+    pixels = 0.5 * point_size + 1.0
+    first = np.floor((((ndc - margin).min(axis=0)) * 0.5 + 0.5) * size - pixels).clip(0, size).astype(int)
+    last = np.ceil((((ndc + margin).max(axis=0)) * 0.5 + 0.5) * size + pixels).clip(0, size).astype(int)
     if (last <= first).any():
         return None
     return int(first[0]), int(first[1]), int(last[0] - first[0]), int(last[1] - first[1])

@@ -123,19 +123,27 @@ def test_each_repeat_counts_once_per_pixel_as_the_reference(tmp_path, gl_ctx, sc
     assert (counts != ref).sum() <= 0.03 * covered.sum()
 
 
-def test_screen_rect_holds_every_pseudo_particle():
+@pytest.mark.parametrize("eye, spread, radius", [((0.0, 6.0, 25.0), 1.5, 0.8), ((0.0, 5.0, 6.0), 0.7, 0.6)])
+def test_screen_rect_holds_every_pseudo_particle(eye, spread, radius):
+    """The rectangle holds every pixel the reference covers, also for balls close to the camera and off axis
+    (their images stretch outwards), and is smaller than the view."""
     rng = np.random.default_rng(3)
-    positions = rng.normal(0.0, 1.5, (500, 3)).astype(np.float32) + [0.0, 5.0, 0.0]
-
-    view_proj = (perspective(np.radians(50.0), WIDTH / HEIGHT, 0.1, 200.0) @ look_at((0, 6, 25), (0, 5, 0))).astype(
+    positions = rng.normal(0.0, spread, (500, 3)).astype(np.float32) + [0.0, 5.0, 0.0]
+    view_proj = (perspective(np.radians(50.0), WIDTH / HEIGHT, 0.1, 200.0) @ look_at(eye, (0, 5, 0))).astype(
         np.float32)
-    rect = screen_rect(positions, view_proj, WIDTH, HEIGHT, radius=0.8, point_size=2.0)
-    ref = reference_counts(positions, view_proj, np.ones((HEIGHT, WIDTH)), 4, 2, 9, 0.8, 2.0)
+    rect = screen_rect(positions, view_proj, WIDTH, HEIGHT, radius=radius, point_size=2.0)
+    ref = reference_counts(positions, view_proj, np.ones((HEIGHT, WIDTH)), 8, 2, 9, radius, 2.0)
     ys, xs = np.nonzero(ref)
     x, y, w, h = rect
     assert len(xs) and x <= xs.min() and xs.max() < x + w and y <= ys.min() and ys.max() < y + h
-    assert w * h < WIDTH * HEIGHT  # and tighter than the view
-    behind = view_proj @ np.array([0.0, 6.0, 26.0, 1.0])
-    assert behind[3] <= 0  # a particle behind the camera: the whole view
-    assert screen_rect(np.r_[positions, [[0.0, 6.0, 26.0]]], view_proj, WIDTH, HEIGHT, 0.8, 2.0) == (0, 0, WIDTH, HEIGHT)
+    assert w * h < WIDTH * HEIGHT
+
+
+def test_screen_rect_whole_view_or_none():
+    positions = np.array([[0.0, 5.0, 0.0], [1.0, 6.0, 0.0]], np.float32)
+    view_proj = (perspective(np.radians(50.0), WIDTH / HEIGHT, 0.1, 200.0) @ look_at((0, 6, 25), (0, 5, 0))).astype(
+        np.float32)
+    assert screen_rect(np.r_[positions, [[0.0, 6.0, 25.3]]], view_proj, WIDTH, HEIGHT, 0.8, 2.0) == (
+        0, 0, WIDTH, HEIGHT)  # a ball reaching the camera plane: the whole view
     assert screen_rect(positions + [500.0, 0.0, 0.0], view_proj, WIDTH, HEIGHT, 0.8, 2.0) is None  # off screen
+    assert screen_rect(np.zeros((0, 3), np.float32), view_proj, WIDTH, HEIGHT, 0.8, 2.0) is None
