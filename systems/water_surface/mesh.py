@@ -253,8 +253,8 @@ def _ear_clip(faces: I64, positions: F64, lengths: I64) -> I64:
         active = remaining >= 3
         if not active.any():
             break
-        a = np.take_along_axis(positions, prv[..., None], 1)
-        c = np.take_along_axis(positions, nxt[..., None], 1)
+        a = positions[rows[:, None], prv]
+        c = positions[rows[:, None], nxt]
         b = positions
         ab, bc = b - a, c - b
         turn = ab[..., 0] * bc[..., 1] - ab[..., 1] * bc[..., 0]
@@ -277,17 +277,19 @@ def _ear_clip(faces: I64, positions: F64, lengths: I64) -> I64:
 
 
 def _blocked(positions: F64, alive: np.ndarray, a: F64, b: F64, c: F64, eps: float) -> np.ndarray:
-    """(F, L): whether another live vertex lies inside or on the triangle (a, b, c) of each candidate ear."""
-    q = positions[:, None, :, :]  # test points along axis 2
-    A, B, C = a[:, :, None, :], b[:, :, None, :], c[:, :, None, :]
+    """(F, L): whether another live vertex lies inside or on the triangle (a, b, c) of each candidate ear.
+
+    Coordinates one at a time, test points along the last axis: (F, L, L) arrays whose inner axis is long."""
+    qx, qy = positions[:, None, :, 0], positions[:, None, :, 1]  # test points along axis 2
+    corners = [(p[..., 0][..., None], p[..., 1][..., None]) for p in (a, b, c)]
 
     def side(p0, p1):
-        e = p1 - p0
-        r = q - p0
-        return e[..., 0] * r[..., 1] - e[..., 1] * r[..., 0]
+        return (p1[0] - p0[0]) * (qy - p0[1]) - (p1[1] - p0[1]) * (qx - p0[0])
 
-    inside = (side(A, B) >= -eps) & (side(B, C) >= -eps) & (side(C, A) >= -eps)
-    same = np.zeros(inside.shape, bool)
-    for corner in (A, B, C):
-        same |= np.sum((q - corner) ** 2, axis=-1) < 1e-20
-    return np.any(inside & ~same & alive[:, None, :], axis=2)
+    inside = (side(corners[0], corners[1]) >= -eps) & (side(corners[1], corners[2]) >= -eps)
+    inside &= side(corners[2], corners[0]) >= -eps
+    inside &= alive[:, None, :]
+    for x, y in corners:
+        dx, dy = qx - x, qy - y
+        inside &= dx * dx + dy * dy >= 1e-20  # the triangle's own corners do not block it
+    return np.logical_or.reduce(inside, axis=2)
