@@ -26,7 +26,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from systems.water_surface.geometry import F64, I64, Grid, ranges
+from systems.water_surface.geometry import F64, I64, Grid, ranges, sum_of
 
 __all__ = ["courant_k", "dents", "free_degree", "neighbour_sum", "neighbour_table", "propagate"]
 
@@ -69,16 +69,11 @@ def neighbour_table(nz: int, nx: int) -> I64:
     return table
 
 
-_DENSE_GRID = 1 << 14  # up to this many vertices, the touched vertices are gathered with dense counts
-
-
-def _gather_touched(index: I64, size: int, *values: F64) -> tuple:
-    """The distinct vertices in ``index`` and each of ``values`` summed per vertex."""
-    if size <= _DENSE_GRID:
-        touched = np.bincount(index, minlength=size).nonzero()[0]
-        return (touched, *(np.bincount(index, v, size)[touched] for v in values))
-    touched, inverse = np.unique(index, return_inverse=True)
-    return (touched, *(np.bincount(inverse, v, len(touched)) for v in values))
+def _per_vertex_sums(index: I64, size: int, *values: F64) -> tuple:
+    """For every entry of ``index`` (vertices, repeats allowed), each of ``values`` summed over all the entries
+    of the same vertex: no sort and no search for the distinct vertices (a repeated vertex is then simply
+    computed, and written, more than once with the same result)."""
+    return tuple(np.bincount(index, v, size)[index] for v in values)
 
 
 def propagate(z: F64, zp: F64, k: float, coefficient: F64, degree: F64, solid: I64 | None = None,
@@ -108,24 +103,29 @@ def propagate(z: F64, zp: F64, k: float, coefficient: F64, degree: F64, solid: I
         index.append(g)
         ds.append(w * points[p])
         dd.append(w)
-    s = neighbour_sum(z, scratch)
     special = None
     if index:  # eq. 2.11 at the vertices next to bodies or added points (computed before zp may be overwritten)
         many = len(index) > 1
-        touched, s_extra, d_extra = _gather_touched(np.concatenate(index) if many else index[0], z.size,
-                                                    np.concatenate(ds) if many else ds[0],
-                                                    np.concatenate(dd) if many else dd[0])
-        s_t = s.ravel()[touched] + s_extra
+        touched = np.concatenate(index) if many else index[0]
+        s_extra, d_extra = _per_vertex_sums(touched, z.size, np.concatenate(ds) if many else ds[0],
+                                            np.concatenate(dd) if many else dd[0])
+        around = neighbour_table(nz, nx)[touched]
+        s_t = sum_of(np.where(around >= 0, zf[around], 0.0), axis=1) + s_extra
         d_t = degree.ravel()[touched] + d_extra
         lonely = d_t <= 1e-12
         k_t = np.minimum(k, 2.0 / np.where(lonely, 1.0, d_t))  # k·D ≤ 2: stable with the extra neighbours
         z_t = zf[touched]
         special = np.where(lonely, z_t, 2.0 * z_t - zpf[touched] + k_t * (s_t - d_t * z_t))
-    s *= k
-    s -= zp
+    # eq. 2.8: z(t+1) = (2 − n·k)·z − z(t−1) + Σ_neighbours k·z_nb, in seven passes over the grid
+    s = np.empty_like(z) if scratch is None else scratch
     new = zp if reuse else np.empty_like(z)
-    np.multiply(coefficient, z, out=new)
-    new += s  # eq. 2.8: z(t+1) = (2 − n·k)·z + k·Σ z_nb − z(t−1)
+    np.multiply(coefficient, z, out=s)
+    np.subtract(s, zp, out=new)
+    np.multiply(z, k, out=s)
+    new[:, 1:] += s[:, :-1]
+    new[:, :-1] += s[:, 1:]
+    new[1:, :] += s[:-1, :]
+    new[:-1, :] += s[1:, :]
     if special is not None:
         new.ravel()[touched] = special
     if not has_points:
