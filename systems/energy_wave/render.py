@@ -1,23 +1,31 @@
 """The energy-wave render feature: additive billboards expanded on the GPU, plus a glow (bloom) pass.
 
 Per frame, :func:`~systems.energy_wave.extract.extract_frame` packs one record per particle; they are uploaded to
-an RGBA32F texture (three texels a record) and drawn as quads of two triangles with no vertex buffer: per emitter,
-one draw for single sprites, one for trails (6 × particles × M vertices) and one for bars (6 × particles × N);
-the vertex shader finds its particle, sub-sprite and corner from ``gl_VertexID`` (eqs. 3.7–3.9). (Not instanced:
-llvmpipe runs its vertex pipeline once per instance, a fixed cost that made up most of the vertex work.) Blending is additive (ONE, ONE), depth-tested against
-the scene with no depth writes, so no sorting is needed.
+an RGBA32F texture (three texels a record) and drawn as octagons (the quad with its corners cut where the sprite's
+falloff is 0; a fan of six triangles) with no vertex buffer: per emitter, one draw for single sprites, one for trails
+(18 × particles × M vertices) and one for bars (18 × particles × N); the vertex shader finds its particle, sub-sprite
+and corner from ``gl_VertexID`` (eqs. 3.7–3.9). (Not instanced: llvmpipe runs its vertex pipeline once per instance,
+a fixed cost that made up most of the vertex work.) Blending is additive (ONE, ONE), depth-tested against the scene
+with no depth writes, so no sorting is needed.
 
 Passes per view, in the transparent phase (off-screen particles, Nguyen, GPU Gems 3 ch. 23: the soft sprites are
 fill-rate bound, so they are drawn at half resolution):
-``energy_wave.sprites.<view>``: every sprite, additively, into a half-resolution HDR buffer; occlusion is the depth
-test against the view's depth texture, done in the fragment shader (no depth writes);
+``energy_wave.sprites.<view>``: every sprite, additively, into a half-resolution HDR buffer; occlusion is the
+hardware depth test (no writes) against a half-resolution depth target that a first full-rectangle draw fills with
+the view's depth (one full-size pixel per particle-buffer pixel) while clearing the colour;
 ``energy_wave.glow_blur_x/y.<view>``: a separable Gaussian blur of that buffer at quarter resolution (bloom);
 ``energy_wave.composite.<view>``: buffer + glow strength × blurred buffer, added onto the view's HDR colour.
 The glow of a frame uses the largest ``glow`` and ``glow_radius`` among the emitters.
+
+Every pass is scissored to the part of its target that can differ from zero or that a later pass reads
+(:func:`pass_rects`): the sprites' projected bounds (:func:`sprite_bounds`) grown by the blur's reach and the
+bilinear footprints. Outside those rectangles the full-screen passes would only have added zeros, so the image is
+the same while the fill is limited to the pixels near the wave.
 """
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -28,6 +36,7 @@ from engine.render.feature import TRANSPARENT, RenderFeature, View
 from engine.render.graph import TextureDesc
 
 from .extract import BAR, RECORD_FLOATS, SINGLE, TRAIL, FrameData, extract_frame
+from .simulate import bar_sizes, trail_sizes
 
 if TYPE_CHECKING:
     from engine.render.renderer import Renderer
@@ -37,7 +46,8 @@ SHADERS = Path(__file__).parent / "shaders"
 RECORDS_PER_ROW = 1024
 PARTICLE_DOWNSCALE = 2  # sprites are drawn at half the view's resolution (off-screen particles), then upsampled
 GLOW_DOWNSCALE = 4
-VERTICES_PER_SPRITE = 6  # two triangles
+QUAD_INDICES = np.array([0, 1, 2, 2, 1, 3], np.uint32)  # a sprite's two triangles over its four corners
+UV = tuple[float, float, float, float]  # (u0, v0, u1, v1) in a view's texture coordinates
 
 
 def radial_gradient(r2: np.ndarray) -> np.ndarray:
@@ -45,6 +55,87 @@ def radial_gradient(r2: np.ndarray) -> np.ndarray:
     inside, 0 outside; ``particles.frag`` evaluates the same formula per fragment."""
     r2 = np.asarray(r2, dtype=np.float64)
     return np.where(r2 < 1.0, (1.0 - r2) ** 2 * np.exp(-3.0 * r2), 0.0)
+
+
+def sprite_bounds(data: FrameData, view_proj: np.ndarray, right: np.ndarray, up: np.ndarray) -> UV | None:
+    """Texture-coordinate bounds of every sprite of the frame in a view; (0, 0, 1, 1) when one reaches behind the
+    camera. The sprites of a trail (eq. 3.7) or a bar (eq. 3.8) lie on the segment between two end points, each
+    within the camera-facing square of the emitter's largest sprite size (eq. 3.9, trail scale); the square is
+    planar and convex and projection keeps convex hulls, so the projected corners of the ends' squares bound them."""
+    m = view_proj.astype(np.float64)
+    clips, sizes = [], []
+    for emitter in data.emitters:
+        cfg = emitter.config
+        records = data.records[emitter.first: emitter.first + emitter.total]
+        single, trail, bar = emitter.counts
+        size = cfg.particle_size * max(1.0, float(trail_sizes(cfg.trail_textures, cfg.trail_end_scale).max()),
+                                       float(bar_sizes(cfg.splash_samples, cfg.splash_roundness).max()))
+        centre = records[:, 0:3] @ m[:, :3].T + m[:, 3]  # clip coordinates of the particles
+        ends = [centre]
+        if trail:
+            ends.append(records[single: single + trail, 4:7] @ m[:, :3].T + m[:, 3])  # P0, the trail's other end
+        if bar:
+            reach = cfg.bar_spacing * cfg.particle_size * (cfg.splash_samples - 1)
+            tips = records[single + trail:, 8:11] @ (m[:, :3].T * reach)
+            ends += [centre[single + trail:] + tips, centre[single + trail:] - tips]
+        clips += ends
+        sizes += [np.full(len(e), size) for e in ends]
+    if not clips:
+        return None
+    clip, size = np.concatenate(clips), np.concatenate(sizes)
+    dx = np.abs(m[:, :3] @ np.asarray(right, np.float64))  # clip-space change along the square's sides
+    dy = np.abs(m[:, :3] @ np.asarray(up, np.float64))
+    reach = dx + dy  # per unit of size: a corner's clip coordinates lie within centre ± reach·size
+    w_lo = clip[:, 3] - reach[3] * size  # 0 for a camera-facing square but for rounding
+    w_hi = clip[:, 3] + reach[3] * size
+    if w_lo.min() <= 1e-6:
+        return 0.0, 0.0, 1.0, 1.0
+    bounds = []
+    for axis in (0, 1):  # x / w over the box [x ± reach·size] × [w_lo, w_hi] (w > 0): extremes at its corners
+        low, high = clip[:, axis] - reach[axis] * size, clip[:, axis] + reach[axis] * size
+        bounds.append((min((low / w_lo).min(), (low / w_hi).min()), max((high / w_lo).max(), (high / w_hi).max())))
+    (x0, x1), (y0, y1) = bounds
+    return float(x0 * 0.5 + 0.5), float(y0 * 0.5 + 0.5), float(x1 * 0.5 + 0.5), float(y1 * 0.5 + 0.5)
+
+
+def _grow(rect: UV, du: float, dv: float) -> UV:
+    return rect[0] - du, rect[1] - dv, rect[2] + du, rect[3] + dv
+
+
+def _union(a: UV, b: UV) -> UV:
+    return min(a[0], b[0]), min(a[1], b[1]), max(a[2], b[2]), max(a[3], b[3])
+
+
+def pixel_rect(rect: UV, width: int, height: int) -> tuple[int, int, int, int]:
+    """(x, y, w, h) pixels of a ``width`` × ``height`` target whose centres can lie in ``rect`` (clamped)."""
+    x0 = min(max(math.floor(rect[0] * width), 0), width)
+    y0 = min(max(math.floor(rect[1] * height), 0), height)
+    x1 = min(max(math.ceil(rect[2] * width), x0), width)
+    y1 = min(max(math.ceil(rect[3] * height), y0), height)
+    return x0, y0, x1 - x0, y1 - y0
+
+
+def pass_rects(bounds: UV, particles: tuple[int, int], glow_size: tuple[int, int], radius: float,
+               glow: bool) -> dict[str, UV]:
+    """What each pass must write so that the image equals the unscissored passes' (texture coordinates).
+
+    ``composite``: where the particle buffer or the glow can be non-zero (sprites grown by a particle texel, the
+    blur's reach of ``radius`` quarter texels per axis and bilinear footprints); ``blur_y``: what the composite
+    samples; ``blur_x``: what ``blur_y`` samples; ``particles``: what ``blur_x`` and the composite sample, cleared
+    (and given the scene's depth) before the sprites are drawn. Margins of two texels per bilinear read.
+    """
+    th = 1.0 / particles[0], 1.0 / particles[1]
+    sprites = _grow(bounds, th[0], th[1])
+    if not glow:
+        composite = _grow(sprites, 2 * th[0], 2 * th[1])
+        return dict(composite=composite, particles=_grow(composite, 2 * th[0], 2 * th[1]))
+    tq = 1.0 / glow_size[0], 1.0 / glow_size[1]
+    reach = radius * tq[0], radius * tq[1]  # 4 taps of radius / 4 texels
+    composite = _grow(sprites, reach[0] + 3 * tq[0] + th[0], reach[1] + 3 * tq[1] + th[1])
+    blur_y = _grow(composite, 2 * tq[0], 2 * tq[1])
+    blur_x = _grow(blur_y, 2 * tq[0], reach[1] + 2 * tq[1])
+    cleared = _union(_grow(blur_x, reach[0] + 2 * tq[0], 2 * tq[1]), _grow(composite, 2 * th[0], 2 * th[1]))
+    return dict(composite=composite, blur_y=blur_y, blur_x=blur_x, particles=cleared)
 
 
 def _set(prog: moderngl.Program, **values) -> None:
@@ -66,6 +157,8 @@ class EnergyWaveFeature(RenderFeature):
         self._uploaded_frame = -1
         self._staging = np.zeros((0, RECORD_FLOATS), np.float32)  # the upload's whole rows, reused
         self._vao: moderngl.VertexArray | None = None
+        self._indices: moderngl.Buffer | None = None
+        self._index_sprites = 0  # sprites the index buffer covers
         self._fullscreen: dict[str, moderngl.VertexArray] = {}
 
     # ------------------------------------------------------------------------------------------ extraction
@@ -76,9 +169,18 @@ class EnergyWaveFeature(RenderFeature):
     def _program(self, name: str) -> moderngl.Program:
         return self.renderer.load_program(SHADERS, name)
 
-    def _sprite_vao(self) -> moderngl.VertexArray:
-        if self._vao is None:
-            self._vao = self.ctx.vertex_array(self._program("particles"), [])  # corners from gl_VertexID
+    def _sprite_vao(self, sprites: int) -> moderngl.VertexArray:
+        """The sprites' vertex array: no attributes (corners from ``gl_VertexID``), an index buffer of two triangles
+        per sprite over its four corners, so llvmpipe shades each corner once (6 indices, 4 vertices)."""
+        if self._vao is None or sprites > self._index_sprites:
+            for obj in (self._vao, self._indices):
+                if obj is not None:
+                    obj.release()
+            self._index_sprites = 1 << max(10, (sprites - 1).bit_length())
+            corners = 4 * np.arange(self._index_sprites, dtype=np.uint32)[:, None] + QUAD_INDICES
+            self._indices = self.ctx.buffer(corners.tobytes())
+            self._vao = self.ctx.vertex_array(self._program("particles"), [], index_buffer=self._indices,
+                                              index_element_size=4)
         return self._vao
 
     def _fullscreen_vao(self, name: str) -> moderngl.VertexArray:
@@ -110,13 +212,13 @@ class EnergyWaveFeature(RenderFeature):
 
     # ---------------------------------------------------------------------------------------------- drawing
     def _draw_sprites(self, view: View, data: FrameData) -> None:
-        vao = self._sprite_vao()
+        vao = self._sprite_vao(max(e.total * max(1, e.config.trail_textures, e.config.splash_samples)
+                                   for e in data.emitters))
         prog = vao.program
         self._records.use(0)
         view_m = view.view.astype(np.float64)
-        _set(prog, records=0, scene_depth=2, records_per_row=RECORDS_PER_ROW,
-             camera_right=tuple(map(float, view_m[0, :3])), camera_up=tuple(map(float, view_m[1, :3])),
-             depth_scale=float(PARTICLE_DOWNSCALE))
+        _set(prog, records=0, records_per_row=RECORDS_PER_ROW,
+             camera_right=tuple(map(float, view_m[0, :3])), camera_up=tuple(map(float, view_m[1, :3])))
         prog["view_proj"].write(view.view_proj.T.astype(np.float32).tobytes())
         for emitter in data.emitters:
             cfg = emitter.config
@@ -131,7 +233,7 @@ class EnergyWaveFeature(RenderFeature):
                 count = emitter.counts[group]
                 if count:
                     _set(prog, first=first, mode=mode, sprites=sprites)
-                    vao.render(moderngl.TRIANGLES, vertices=VERTICES_PER_SPRITE * count * sprites)
+                    vao.render(moderngl.TRIANGLES, vertices=len(QUAD_INDICES) * count * sprites)
                 first += count
 
     def add_passes(self, graph, view: View, data: FrameData) -> None:
@@ -142,31 +244,50 @@ class EnergyWaveFeature(RenderFeature):
         glow_size = (max(1, view.width // GLOW_DOWNSCALE), max(1, view.height // GLOW_DOWNSCALE))
         glow = max(e.config.glow for e in data.emitters)
         radius = max(e.config.glow_radius for e in data.emitters)
+        view_m = view.view.astype(np.float64)
+        bounds = sprite_bounds(data, view.view_proj, view_m[0, :3], view_m[1, :3])
+        rects = pass_rects(bounds, size, glow_size, radius, glow > 0.0)
+        if pixel_rect(rects["particles"], *size)[2:] == (0, 0) or 0 in pixel_rect(rects["composite"],
+                                                                                   view.width, view.height)[2:]:
+            return  # every sprite off screen: nothing reaches the image
         h: dict[str, object] = {}
 
         def sprites_setup(b):
             b.read(view.depth)
             h["particles"] = b.write(b.create(f"energy_wave.{view.name}.particles",
                                               TextureDesc(size[0], size[1], "rgba16f")))
+            h["depth"] = b.write(b.create(f"energy_wave.{view.name}.depth", TextureDesc(size[0], size[1], "depth24")))
 
         def sprites_execute(pc):
             self._upload(data)
-            fbo = self.renderer.framebuffer(pc.get(h["particles"]))
+            fbo = self.renderer.framebuffer(pc.get(h["particles"]), pc.get(h["depth"]))
+            fbo.scissor = pixel_rect(rects["particles"], *size)
+            fbo.depth_mask = True
             fbo.use()
-            fbo.clear(0.0, 0.0, 0.0, 0.0)
             depth = pc.get(view.depth)
             compare = depth.compare_func
             depth.compare_func = ""  # read depth values, not shadow comparisons
             depth.use(2)
-            ctx.disable(moderngl.DEPTH_TEST)  # depth tested against the view's depth in the shader; no writes
-            ctx.enable(moderngl.BLEND)
-            ctx.blend_func = moderngl.ONE, moderngl.ONE
+            ctx.enable(moderngl.DEPTH_TEST)
+            ctx.disable(moderngl.BLEND)
             try:
+                ctx.depth_func = "1"  # colour 0 and the view's depth, in the rectangle only
+                prepare = self._fullscreen_vao("depth_copy")
+                _set(prepare.program, scene_depth=2, depth_scale=float(PARTICLE_DOWNSCALE))
+                prepare.render(moderngl.TRIANGLES, vertices=3)
+                ctx.depth_func = "<="  # the old in-shader test kept fragments with z <= scene depth
+                fbo.depth_mask = False
+                fbo.use()
+                ctx.enable(moderngl.BLEND)
+                ctx.blend_func = moderngl.ONE, moderngl.ONE
                 self._draw_sprites(view, data)
             finally:
                 depth.compare_func = compare
+                ctx.depth_func = "<"
+                fbo.depth_mask = True
+                fbo.scissor = None
                 ctx.blend_func = moderngl.DEFAULT_BLENDING
-                ctx.disable(moderngl.BLEND)
+                ctx.disable(moderngl.BLEND | moderngl.DEPTH_TEST)
 
         def blur(src_key: str, dst_key: str, axis: int):
             def setup(b):
@@ -176,6 +297,7 @@ class EnergyWaveFeature(RenderFeature):
 
             def execute(pc):
                 fbo = self.renderer.framebuffer(pc.get(h[dst_key]))
+                fbo.scissor = pixel_rect(rects[dst_key], *glow_size)
                 fbo.use()
                 ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
                 vao = self._fullscreen_vao("glow_blur")
@@ -183,7 +305,10 @@ class EnergyWaveFeature(RenderFeature):
                 step = [0.0, 0.0]
                 step[axis] = (radius / 4.0) / glow_size[axis]
                 _set(vao.program, source=0, step_uv=tuple(step))
-                vao.render(moderngl.TRIANGLES, vertices=3)
+                try:
+                    vao.render(moderngl.TRIANGLES, vertices=3)
+                finally:
+                    fbo.scissor = None
 
             return setup, execute
 
@@ -195,6 +320,7 @@ class EnergyWaveFeature(RenderFeature):
 
         def composite_execute(pc):
             fbo = self.renderer.framebuffer(pc.get(view.color))
+            fbo.scissor = pixel_rect(rects["composite"], view.width, view.height)
             fbo.use()
             ctx.disable(moderngl.DEPTH_TEST)
             ctx.enable(moderngl.BLEND)
@@ -206,6 +332,7 @@ class EnergyWaveFeature(RenderFeature):
                 _set(vao.program, particles=0, glow=1, glow_strength=float(glow))
                 vao.render(moderngl.TRIANGLES, vertices=3)
             finally:
+                fbo.scissor = None
                 ctx.blend_func = moderngl.DEFAULT_BLENDING
                 ctx.disable(moderngl.BLEND)
 
@@ -216,8 +343,9 @@ class EnergyWaveFeature(RenderFeature):
         graph.add_pass(f"energy_wave.composite.{view.name}", composite_setup, composite_execute)
 
     def release(self) -> None:
-        for obj in (self._records, self._vao, *self._fullscreen.values()):
+        for obj in (self._records, self._vao, self._indices, *self._fullscreen.values()):
             if obj is not None:
                 obj.release()
-        self._records = self._vao = None
+        self._records = self._vao = self._indices = None
+        self._index_sprites = 0
         self._fullscreen.clear()

@@ -1,8 +1,9 @@
 #version 330
 // Energy-wave sprites (seeds/000, section 3.4), expanded on the GPU from one record per particle.
 // Records live in an RGBA32F texture, three texels each: (position, alpha), (hit point P0, -), (direction d, -).
-// No instancing (llvmpipe pays a fixed cost per instance): vertex v of a draw is corner v % 6 of sprite
-// k = v / 6 (two triangles of a quad), and sprite k is sub-sprite j = k % sprites of particle first + k / sprites:
+// No instancing (llvmpipe pays a fixed cost per instance): vertex v of a draw is corner v % 4 of sprite k = v / 4
+// (an index buffer makes the quad's two triangles, so each corner is shaded once), and sprite k is sub-sprite
+// j = k % sprites of particle first + k / sprites:
 //   mode 0: one sprite at the particle (beam particles, grains);
 //   mode 1: continuous trail, eq. 3.7: T_j = P0 + (P1 - P0) j / M, size shrinking towards P1;
 //   mode 2: bar, eq. 3.8: U_j = Q + (-1)^(j+1) u j d, and tip size eq. 3.9: S_j = (N - j (1 - t)) / N S
@@ -27,10 +28,9 @@ vec4 fetch(int particle, int texel) {
 }
 
 void main() {
-    const int corners[6] = int[](0, 1, 2, 2, 1, 3);  // triangles (0 1 2) (2 1 3) of the quad's corners
-    int c = corners[gl_VertexID % 6];
+    int c = gl_VertexID & 3;  // corners (0 1 2) (2 1 3) make the quad's triangles (the index buffer)
     vec2 in_corner = vec2((c & 1) == 1 ? 1.0 : -1.0, (c & 2) == 2 ? 1.0 : -1.0);
-    int sprite = gl_VertexID / 6;
+    int sprite = gl_VertexID >> 2;
     int particle = first + sprite / sprites;
     int j = sprite % sprites;
     vec4 a = fetch(particle, 0);

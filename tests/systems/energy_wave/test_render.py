@@ -145,15 +145,15 @@ def _expand_on_gpu(mode, sprites, records, roundness=0.5, spacing=0.4, size=1.0,
         if name in prog:
             prog[name].value = value
     prog["view_proj"].write(np.eye(4, dtype=np.float32).tobytes())
-    vao = ctx.vertex_array(prog, [])  # corners from gl_VertexID: 6 a sprite, two triangles (0 1 2) (2 1 3)
-    out = ctx.buffer(reserve=len(records) * sprites * 6 * 16)
+    vao = ctx.vertex_array(prog, [])  # corners from gl_VertexID: 4 a sprite (the draw indexes them as two triangles)
+    out = ctx.buffer(reserve=len(records) * sprites * 4 * 16)
     fbo = ctx.simple_framebuffer((1, 1))  # a draw, even with rasterization off, needs a complete framebuffer
     fbo.use()
-    vao.transform(out, mode=moderngl.POINTS, vertices=6 * len(records) * sprites)
-    corners = np.frombuffer(out.read(), np.float32).reshape(len(records), sprites, 6, 4)[..., :3]
+    vao.transform(out, mode=moderngl.POINTS, vertices=4 * len(records) * sprites)
+    corners = np.frombuffer(out.read(), np.float32).reshape(len(records), sprites, 4, 4)[..., :3]
     for obj in (vao, out, fbo, tex, prog):
         obj.release()
-    return corners.mean(axis=2), (corners[:, :, 5, 0] - corners[:, :, 0, 0]) / 2.0  # centres, sizes
+    return corners.mean(axis=2), (corners[:, :, 3, 0] - corners[:, :, 0, 0]) / 2.0  # centres, sizes
 
 
 def _record(position, hit=(0.0, 0.0, 0.0), direction=(1.0, 0.0, 0.0), alpha=1.0):
@@ -194,3 +194,62 @@ def test_rendering_does_not_change_the_state(tmp_path):
     render_app(rendered, width=48, height=32, frames=5)
     plain.step(35)
     assert rendered.state_hash() == plain.state_hash()
+
+
+@pytest.mark.parametrize("extra", ["", "glow = 0.0", "glow_radius = 6.0\nparticle_size = 0.2"])
+def test_scissored_passes_give_the_full_screen_image(tmp_path, monkeypatch, extra):
+    """The passes limited to the sprites' screen rectangle (grown by the glow's reach) draw the same image as the
+    passes over the whole view (sprite bounds replaced by the whole view)."""
+    from systems.energy_wave import render
+
+    scissored, app = _render(tmp_path, "reference", size=(160, 120), extra=extra)
+    data = extract_frame(app.world)
+    monkeypatch.setattr(render, "sprite_bounds", lambda *args: (0.0, 0.0, 1.0, 1.0))
+    full, _ = _render(tmp_path, "reference", size=(160, 120), extra=extra)
+    assert np.array_equal(scissored, full)
+    assert len(data.records) > 100
+
+
+def test_sprite_bounds_enclose_every_sprite_corner():
+    """Sprite bounds against the corners of every sprite expanded on the GPU (trails, bars, singles)."""
+    from systems.energy_wave.extract import EmitterDraw, FrameData
+    from systems.energy_wave.render import sprite_bounds
+
+    app = make_app(8)
+    add_box(app, (0.0, 0.0, -1.2), (2.0, 2.0, 0.2))
+    _, cfg, st = add_emitter(app, splash_samples=6, trail_textures=4, continuity_probability=0.5,
+                             splash_roundness=0.2, bar_spacing=1.5)
+    app.step(40)
+    records, counts = pack_emitter(cfg, st)
+    data = FrameData(records, [EmitterDraw(0, counts, cfg)])
+    eye = np.array([0.6, 0.3, 2.5])
+    forward = -eye / np.linalg.norm(eye)
+    right = np.cross(forward, [0.0, 1.0, 0.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    view = np.eye(4)
+    view[0, :3], view[1, :3], view[2, :3] = right, up, -forward
+    view[:3, 3] = -view[:3, :3] @ eye
+    f, near, far = 1.0 / np.tan(np.radians(30.0)), 0.1, 50.0
+    proj = np.array([[f, 0, 0, 0], [0, f, 0, 0], [0, 0, (far + near) / (near - far), 2 * far * near / (near - far)],
+                     [0, 0, -1, 0]])
+    view_proj = (proj @ view).astype(np.float32)
+    u0, v0, u1, v1 = sprite_bounds(data, view_proj, right, up)
+    corners = []
+    single, trail, bar = counts
+    for mode, sprites, rows in ((0, 1, slice(0, single)), (1, cfg.trail_textures, slice(single, single + trail)),
+                                (2, cfg.splash_samples, slice(single + trail, None))):
+        if len(records[rows]):
+            centres, sizes = _expand_on_gpu(mode, sprites, records[rows], roundness=cfg.splash_roundness,
+                                            spacing=cfg.bar_spacing, size=cfg.particle_size,
+                                            trail_end=cfg.trail_end_scale)
+            for a in (-1.0, 1.0):
+                for b in (-1.0, 1.0):
+                    corners.append((centres + (a * right + b * up) * sizes[..., None]).reshape(-1, 3))
+    corners = np.concatenate(corners)
+    clip = np.c_[corners, np.ones(len(corners))] @ view_proj.T.astype(np.float64)
+    uv = clip[:, :2] / clip[:, 3:] * 0.5 + 0.5
+    assert min(trail, bar) > 0
+    assert (uv[:, 0] >= u0 - 1e-6).all() and (uv[:, 0] <= u1 + 1e-6).all()
+    assert (uv[:, 1] >= v0 - 1e-6).all() and (uv[:, 1] <= v1 + 1e-6).all()
+    assert u1 - u0 < 1.5 * np.ptp(uv[:, 0]) and v1 - v0 < 1.5 * np.ptp(uv[:, 1])  # and not much larger
