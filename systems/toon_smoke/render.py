@@ -31,6 +31,48 @@ RAMP_TEXELS = 256
 MAX_VOLUMES = 16
 
 
+def _outline_reach(data: list[VolumeDraw]) -> int:
+    return int(np.ceil(max((d.outline_width for d in data), default=0.0)))
+
+
+def screen_rect(view: View, data: list[VolumeDraw], pad: int = 0) -> tuple[int, int, int, int] | None:
+    """Pixel rectangle (x, y, w, h) of the view covering every volume's box (projected corners, ``pad`` pixels
+    more on each side), or None when no volume is in front of the camera and on screen.  A box that reaches
+    behind the camera makes it the whole view (its projection is unbounded).  Perspective views; orthographic
+    ones have w = 1 everywhere, so the same code holds."""
+    if not data:
+        return None
+    if any(d.bounds is None for d in data):
+        return (0, 0, view.width, view.height)
+    bits = np.array([[(i >> k) & 1 for k in range(3)] for i in range(8)], bool)
+    corners = []
+    for draw in data:
+        lo, hi = draw.bounds
+        local = np.where(bits, hi, lo)
+        corners.append(local @ draw.model[:3, :3].T.astype(np.float64) + draw.model[:3, 3])
+    clip = np.stack([np.c_[c, np.ones(8)] @ view.view_proj.T.astype(np.float64) for c in corners])  # (n, 8, 4)
+    in_front = np.any(clip[..., 3] > 1e-6, axis=1)
+    if not in_front.any():
+        return None
+    clip = clip[in_front].reshape(-1, 4)  # volumes wholly behind the camera are not seen
+    w = clip[:, 3]
+    if np.any(w <= 1e-6):
+        return (0, 0, view.width, view.height)
+    ndc = clip[:, :3] / w[:, None]
+    if np.all(ndc[:, 0] < -1) or np.all(ndc[:, 0] > 1) or np.all(ndc[:, 1] < -1) or np.all(ndc[:, 1] > 1) \
+            or np.all(ndc[:, 2] > 1):
+        return None
+    x0 = int(np.floor((ndc[:, 0].min() + 1) * 0.5 * view.width)) - pad
+    x1 = int(np.ceil((ndc[:, 0].max() + 1) * 0.5 * view.width)) + pad
+    y0 = int(np.floor((ndc[:, 1].min() + 1) * 0.5 * view.height)) - pad
+    y1 = int(np.ceil((ndc[:, 1].max() + 1) * 0.5 * view.height)) + pad
+    x0, y0 = max(x0, 0), max(y0, 0)
+    x1, y1 = min(x1, view.width), min(y1, view.height)
+    if x1 <= x0 or y1 <= y0:
+        return None
+    return (x0, y0, x1 - x0, y1 - y0)
+
+
 def ramp_texels(colors, positions, texels: int = RAMP_TEXELS) -> np.ndarray:
     """The 1D tone-mapping texture of figure 3: texel i (c = (i + ½)/texels) takes the colour of the last band
     whose start position is ≤ c.  Returns (texels, 3) float32."""
@@ -53,6 +95,7 @@ class VolumeDraw:
     outline_color: tuple
     outline_threshold: float
     obstacle: tuple | None  # (centre, radius, colour)
+    bounds: tuple[np.ndarray, np.ndarray] | None = None  # local box holding the mesh and the obstacle
 
 
 @dataclass
@@ -102,12 +145,16 @@ class ToonSmokeFeature(RenderFeature):
                 verts = np.concatenate([state.mesh_vertices, state.mesh_normals], axis=1).astype(np.float32)
                 mesh = (verts, state.mesh_faces.astype(np.uint32).ravel())
             obstacle = None
+            half = 0.5 * np.asarray(cfg.extent, np.float64)
+            lo, hi = -half, half.copy()
             if cfg.obstacle_radius > 0.0:
                 obstacle = (tuple(cfg.obstacle_center), cfg.obstacle_radius, tuple(cfg.obstacle_color))
+                centre = np.asarray(cfg.obstacle_center, np.float64)
+                lo, hi = np.minimum(lo, centre - cfg.obstacle_radius), np.maximum(hi, centre + cfg.obstacle_radius)
             out.append(VolumeDraw(entity, index, state.mesh_version, mesh, rigid_matrix(t).astype(np.float32),
                                   (tuple(map(tuple, cfg.ramp_colors)), tuple(cfg.ramp_positions)),
                                   cfg.outline_width, tuple(cfg.outline_color), cfg.outline_depth_threshold,
-                                  obstacle))
+                                  obstacle, (lo, hi)))
         return out
 
     # ---------------------------------------------------------------- resources
@@ -181,7 +228,10 @@ class ToonSmokeFeature(RenderFeature):
 
     def _draw_surfaces(self, pc, view: View, data: list[VolumeDraw], edges_handle) -> None:
         edges = pc.get(edges_handle)
-        self.renderer.framebuffer(edges).clear(0.0, 0.0, 0.0, 0.0)
+        rect = screen_rect(view, data, pad=_outline_reach(data) + 1)
+        if rect is None:  # every volume is off screen
+            return
+        self.renderer.framebuffer(edges).clear(0.0, 0.0, 0.0, 0.0, viewport=rect)
         fbo = self.renderer.framebuffer([pc.get(view.color), edges], pc.get(view.depth))
         fbo.use()
         self.ctx.enable(moderngl.DEPTH_TEST)
@@ -205,8 +255,12 @@ class ToonSmokeFeature(RenderFeature):
                 self._sphere_vao().render(moderngl.TRIANGLES)
 
     def _draw_outline(self, pc, view: View, data: list[VolumeDraw], edges_handle) -> None:
+        rect = screen_rect(view, data)  # the outline lies on the volumes' pixels: their rectangle is enough
+        if rect is None:
+            return
         fbo = self.renderer.framebuffer(pc.get(view.color))
         fbo.use()
+        fbo.viewport = rect  # the full-screen triangle covers the rectangle; gl_FragCoord stays in view pixels
         self.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
         if self._outline_vao is None:
             prog = self.renderer.load_program(SHADERS, "outline")
@@ -224,6 +278,7 @@ class ToonSmokeFeature(RenderFeature):
         prog["colors"].value = colors
         set_uniforms(prog, exposure=float(self.renderer.settings.exposure))
         self._outline_vao.render(moderngl.TRIANGLES, vertices=3)
+        fbo.viewport = (0, 0, view.width, view.height)
 
     def release(self) -> None:
         for mesh in self._meshes.values():

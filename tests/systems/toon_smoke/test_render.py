@@ -82,3 +82,33 @@ def test_rendering_does_not_change_the_state_hash(tmp_path):
     drawn = make_app(tmp_path, scene_text("explosion"))
     render_app(drawn, 64, 48, frames=2, steps_per_frame=3)
     assert drawn.state_hash() == plain.state_hash()
+
+
+def test_outline_pass_is_limited_to_the_volumes_screen_rectangle(tmp_path):
+    """The edge clear and the outline pass cover only the projected box of the volumes (plus the outline reach):
+    every outline pixel lies inside it, it is much smaller than a view the volume does not fill, and a volume
+    behind the camera needs no rectangle at all."""
+    from dataclasses import replace
+
+    from systems.toon_smoke.render import ToonSmokeFeature, screen_rect
+
+    app = preset_app(tmp_path, "explosion")
+    app.config.render.width, app.config.render.height = 320, 240
+    renderer = make_renderer(app, 320, 240)
+    feature = next(f for f in renderer.features if isinstance(f, ToonSmokeFeature))
+    app.step(STEPS["explosion"])
+    app.render_frame()
+    view, data = renderer.views[0], feature.extract(app.world)
+    rect = screen_rect(view, data)
+    pixels = np.flipud(np.asarray(renderer.read_image()))  # rows from the bottom, as GL's window coordinates
+    ys, xs = np.nonzero(_close(pixels, preset("explosion").outline_color))
+    x, y, w, h = rect
+    assert len(xs) > 20
+    assert xs.min() >= x and xs.max() < x + w and ys.min() >= y and ys.max() < y + h
+    assert w * h < 0.8 * view.width * view.height
+    behind = [replace(d, model=d.model.copy()) for d in data]
+    for d in behind:
+        d.model[:3, 3] = view.camera_pos - 50.0 * view.camera_forward
+    assert screen_rect(view, behind) is None
+    renderer.release()
+    app.renderer = None
