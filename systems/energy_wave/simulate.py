@@ -175,11 +175,20 @@ def assign_patterns(u_circular: F64, u_continuous: F64, alpha: float, beta: floa
     when N = 1, bars when N > 1; bars are round when t >= 0.5, sharp below (the tip shape itself follows t
     continuously through eq. 3.9 when drawn).
     """
-    irregular = (u_circular >= alpha).astype(np.int8)
+    return _patterns(u_circular, u_continuous, alpha, beta, _separated_kind(samples, roundness))
+
+
+def _separated_kind(samples: int, roundness: float) -> int:
+    """Drawing kind of separated particles: 1 grain (N = 1), 2 round bar (t >= 0.5), 3 sharp bar."""
     if samples <= 1:
-        separated_kind = 1
-    else:
-        separated_kind = 2 if roundness >= ROUND_THRESHOLD else 3
+        return 1
+    return 2 if roundness >= ROUND_THRESHOLD else 3
+
+
+def _patterns(u_circular: F64, u_continuous: F64, alpha: F64 | float, beta: F64 | float,
+              separated_kind: NDArray[np.int8] | int) -> NDArray[np.int8]:
+    """:func:`assign_patterns` with α, β and the separated kind per particle (or shared)."""
+    irregular = (u_circular >= alpha).astype(np.int8)
     kind = np.where(u_continuous < beta, 0, separated_kind).astype(np.int8)
     return (2 * kind + irregular).astype(np.int8)
 
@@ -338,16 +347,22 @@ def emit(cfg: EnergyWaveEmitter, state: EnergyWaveState, transform: Transform, r
 
 def _ball(rng: np.random.Generator, count: int) -> F64:
     """Uniform points in the unit ball."""
-    g = rng.standard_normal((count, 3))
-    g /= np.maximum(np.linalg.norm(g, axis=1, keepdims=True), _EPS)
-    return g * np.cbrt(rng.random(count))[:, None]
+    return _ball_points(rng.standard_normal((count, 3)), rng.random(count))
+
+
+def _ball_points(normal: F64, uniform: F64) -> F64:
+    """Uniform points in the unit ball from standard normal triples (directions) and uniforms (radii³)."""
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), _EPS)
+    return normal * np.cbrt(uniform)[:, None]
 
 
 @dataclass
-class _Splash:
-    """Beam particles that hit this step, between their random draws and their landing in the buffer."""
+class _Splashes:
+    """Beam particles of every emitter that hit this step, between their random draws and their landing, emitter
+    after emitter (``first[i]`` .. ``first[i + 1]`` belong to flying emitter i)."""
 
-    rows: NDArray[np.int64]  # buffer slots
+    first: NDArray[np.int64]
+    rows: NDArray[np.int64]  # buffer slots, each in its emitter's buffer
     point: F64  # hit points H
     normal: F64  # surface normals n there
     pattern: NDArray[np.int8]
@@ -355,76 +370,128 @@ class _Splash:
     magnitude: F64  # c (m/s²)
     control: NDArray[np.int8]
     offset: F64  # random offsets of the control points
-    circular: NDArray[np.int64]  # which of them move circularly (eqs. 3.2–3.4)
+    circular: NDArray[np.int64]  # which of them move circularly (eqs. 3.2–3.4), ascending
     drag: F64  # D (eq. 3.2) of the circular ones
-    neighbours: F64  # positions that repel the circular ones (eq. 3.3)
+    neighbours: list[F64]  # per emitter: positions that repel its circular ones (eq. 3.3)
 
 
-def _splash(cfg: EnergyWaveEmitter, state: EnergyWaveState, rng: np.random.Generator, rows: NDArray[np.int64],
-            point: F64, normal: F64, depth: F64) -> _Splash:
-    """Draw the pattern, lifetime, c and control point of the beam particles ``rows`` that hit (sections 3.2–3.3)
-    and the drag D of the circular ones (eq. 3.2), and gather their neighbours; :func:`_repulsions` then gives
-    their repulsion R (eq. 3.3) and :func:`_land` their acceleration (eq. 3.4)."""
-    buf = state.particles
-    n = len(rows)
-    w = buf.velocity[rows]
-    u = rng.random((n, 5))
-    pattern = assign_patterns(u[:, 0], u[:, 1], cfg.circular_probability, cfg.continuity_probability,
-                              cfg.splash_samples, cfg.splash_roundness)
-    lifetime = np.maximum(cfg.lifetime_frames + cfg.lifetime_spread * (2.0 * u[:, 2] - 1.0), 1.0) * FRAME
+def _per_row(values: list[float], counts: NDArray[np.int64]) -> F64:
+    """Each emitter's value repeated for each of its ``counts`` particles."""
+    return np.repeat(np.array(values, dtype=np.float64), counts)
+
+
+def _splash(emitters: list[_Emitter], first: NDArray[np.int64], rows: NDArray[np.int64], point: F64, normal: F64,
+            depth: F64) -> _Splashes:
+    """Draw the pattern, lifetime, c and control point of the beam particles that hit (sections 3.2–3.3) and the
+    drag D of the circular ones (eq. 3.2), and gather their neighbours; :func:`_repulsions` then gives their
+    repulsion R (eq. 3.3) and :func:`_land` their acceleration (eq. 3.4).
+
+    Each emitter draws from its own stream, in the same order as when it steps alone (its uniforms, then its
+    control-point offsets); the arithmetic then runs once over every emitter's particles, with the emitters'
+    parameters repeated per particle (the same operations on the same values: the same bits).
+    """
+    counts = np.diff(first)
+    u_parts, normals, uniforms = [], [], []
+    for i, e in enumerate(emitters):  # loop over emitters: random draws in each one's own stream
+        n = int(counts[i])
+        u_parts.append(e.rng.random((n, 5)) if n else np.zeros((0, 5)))  # no hit, no draw
+        if e.cfg.control_points and n:
+            normals.append(e.rng.standard_normal((n, 3)))
+            uniforms.append(e.rng.random(n))
+    u = np.concatenate(u_parts)
+    cfgs = [e.cfg for e in emitters]
+    pattern = _patterns(u[:, 0], u[:, 1], _per_row([c.circular_probability for c in cfgs], counts),
+                        _per_row([c.continuity_probability for c in cfgs], counts),
+                        np.repeat(np.array([_separated_kind(c.splash_samples, c.splash_roundness) for c in cfgs],
+                                           np.int8), counts))
+    lifetime = np.maximum(_per_row([c.lifetime_frames for c in cfgs], counts)
+                          + _per_row([c.lifetime_spread for c in cfgs], counts) * (2.0 * u[:, 2] - 1.0), 1.0) * FRAME
     continuous = pattern < 2
-    c = np.where(continuous, cfg.acceleration_continuous, cfg.acceleration_separated)
-    spread = np.where(continuous, cfg.acceleration_continuous_spread, cfg.acceleration_separated_spread)
+    c = np.where(continuous, _per_row([c.acceleration_continuous for c in cfgs], counts),
+                 _per_row([c.acceleration_separated for c in cfgs], counts))
+    spread = np.where(continuous, _per_row([c.acceleration_continuous_spread for c in cfgs], counts),
+                      _per_row([c.acceleration_separated_spread for c in cfgs], counts))
     c = np.maximum(c + spread * (2.0 * u[:, 3] - 1.0), 0.0) / FRAME  # (m/s per frame) -> m/s²
     # Irregular: pick a control point by its probability, and a random offset within its spread.
-    control = np.zeros(n, dtype=np.int8)
-    offset = np.zeros((n, 3))
-    if cfg.control_points:
-        weights = np.array([cp.probability for cp in cfg.control_points])
-        cumulative = np.cumsum(weights) / weights.sum()
-        control = np.minimum(np.searchsorted(cumulative, u[:, 4], side="right"), len(weights) - 1).astype(np.int8)
-        radii = np.array([cp.spread for cp in cfg.control_points])
-        offset = _ball(rng, n) * radii[control][:, None]
-    # Circular: the drag D (eq. 3.2) now; neighbours for R (eq. 3.3): every particle already hit (``rows`` are
-    # still BEAM in the buffer) and this step's hits, only those near the queries (the impact zone is small).
+    control = np.zeros(len(u), dtype=np.int8)
+    offset = np.zeros((len(u), 3))
+    if normals:
+        with_points, radii = [], []
+        for i, e in enumerate(emitters):  # loop over emitters with control points (at most 16 points each)
+            if not e.cfg.control_points or not counts[i]:
+                continue
+            own = slice(int(first[i]), int(first[i + 1]))
+            weights = np.array([cp.probability for cp in e.cfg.control_points])
+            cumulative = np.cumsum(weights) / weights.sum()
+            control[own] = np.minimum(np.searchsorted(cumulative, u[own, 4], side="right"), len(weights) - 1)
+            with_points.append(np.arange(own.start, own.stop))
+            radii.append(np.array([cp.spread for cp in e.cfg.control_points])[control[own]])
+        with_points = np.concatenate(with_points)
+        offset[with_points] = _ball_points(np.concatenate(normals), np.concatenate(uniforms)) * \
+            np.concatenate(radii)[:, None]
+    # Circular: the drag D (eq. 3.2) now, in the paper's units (lengths in `equation_unit`, velocities per frame).
     circ = np.flatnonzero(pattern % 2 == 0)
-    unit = cfg.equation_unit  # D and R in the paper's units: lengths in `unit`, velocities per frame
-    drag = penalty_drag(depth[circ] / unit, normal[circ], w[circ] * (FRAME / unit), cfg.spring, cfg.damper)
-    neighbours = np.zeros((0, 3))
-    if circ.size:
-        query = point[circ]
-        settled = in_reach(buf.position[: buf.count], query, cfg.repulsion_radius, buf.pattern[: buf.count] >= 0)
-        neighbours = np.concatenate([buf.position[settled], point[in_reach(point, query, cfg.repulsion_radius)]])
-    return _Splash(rows, point, normal, pattern, lifetime, c, control, offset, circ, drag, neighbours)
+    circ_counts = np.diff(np.searchsorted(circ, first))
+    unit = _per_row([e.cfg.equation_unit for e in emitters], circ_counts)
+    per_frame = _per_row([FRAME / e.cfg.equation_unit for e in emitters], circ_counts)
+    w = np.concatenate([e.state.particles.velocity[e.beam[rows[first[i]: first[i + 1]]]] for i, e in enumerate(emitters)])
+    drag = penalty_drag(depth[circ] / unit, normal[circ], w[circ] * per_frame[:, None],
+                        _per_row([e.cfg.spring for e in emitters], circ_counts),
+                        _per_row([e.cfg.damper for e in emitters], circ_counts))
+    # Neighbours for R (eq. 3.3): every particle of the emitter already hit (its hits are still BEAM in the buffer)
+    # and its hits this step, only those near the queries (the impact zone is small).
+    neighbours = []
+    bounds = np.searchsorted(circ, first)
+    for i, e in enumerate(emitters):  # loop over emitters: each one's particles repel only its own
+        if bounds[i] == bounds[i + 1]:
+            neighbours.append(np.zeros((0, 3)))
+            continue
+        buf = e.state.particles
+        own = point[first[i]: first[i + 1]]
+        query = point[circ[bounds[i]: bounds[i + 1]]]
+        settled = in_reach(buf.position[: buf.count], query, e.cfg.repulsion_radius, buf.pattern[: buf.count] >= 0)
+        neighbours.append(np.concatenate([buf.position[settled], own[in_reach(own, query, e.cfg.repulsion_radius)]]))
+    slots = np.concatenate([e.beam[rows[first[i]: first[i + 1]]] for i, e in enumerate(emitters)])
+    return _Splashes(first, slots, point, normal, pattern, lifetime, c, control, offset, circ, drag, neighbours)
 
 
-def _repulsions(emitters: list[_Emitter], splashes: list[_Splash | None]) -> list[F64 | None]:
-    """R (eq. 3.3) of every splash's circular particles from its own emitter's neighbours, all emitters at once."""
-    groups = [(s.point[s.circular], s.neighbours, e.cfg.repulsion_radius, e.cfg.repulsion * e.cfg.equation_unit)
-              for e, s in zip(emitters, splashes) if s is not None and s.circular.size]
-    found = iter(grouped_repulsion(groups, NEIGHBOUR_SAMPLE_LIMIT))
-    return [next(found) if s is not None and s.circular.size else None for s in splashes]
+def _repulsions(emitters: list[_Emitter], splash: _Splashes) -> F64:
+    """R (eq. 3.3) of every circular particle from its own emitter's neighbours, all emitters at once, in the
+    order of ``splash.circular``."""
+    bounds = np.searchsorted(splash.circular, splash.first)
+    groups = [(splash.point[splash.circular[bounds[i]: bounds[i + 1]]], splash.neighbours[i], e.cfg.repulsion_radius,
+               e.cfg.repulsion * e.cfg.equation_unit) for i, e in enumerate(emitters)]
+    found = grouped_repulsion(groups, NEIGHBOUR_SAMPLE_LIMIT)
+    return np.concatenate(found) if found else np.zeros((0, 3))
 
 
-def _land(state: EnergyWaveState, splash: _Splash, repulsion: F64 | None) -> None:
-    """Turn the beam particles of ``splash`` into splash particles at their hit points: circular ones leave with
-    A = c (D + R)/|D + R| (eq. 3.4) acting for one frame, irregular ones start at rest (eq. 3.5 steers them)."""
-    buf = state.particles
-    rows, circ = splash.rows, splash.circular
-    acceleration = np.zeros((len(rows), 3))
+def _accelerations(splash: _Splashes, repulsion: F64) -> F64:
+    """A = c (D + R)/|D + R| (eq. 3.4) of the circular particles; 0 for the irregular ones (eq. 3.5 steers them)."""
+    acceleration = np.zeros((len(splash.rows), 3))
+    circ = splash.circular
     if circ.size:
         acceleration[circ] = collision_acceleration(splash.drag, repulsion, splash.normal[circ],
                                                     splash.magnitude[circ])
-    buf.position[rows] = splash.point
-    buf.hit_point[rows] = splash.point
+    return acceleration
+
+
+def _land(state: EnergyWaveState, splash: _Splashes, acceleration: F64, own: slice) -> None:
+    """Turn the beam particles ``own`` of ``splash`` into splash particles at their hit points: circular ones leave
+    with A (eq. 3.4) acting for one frame, irregular ones start at rest (eq. 3.5 steers them)."""
+    buf = state.particles
+    rows = splash.rows[own]
+    point = splash.point[own]
+    acceleration = acceleration[own]
+    buf.position[rows] = point
+    buf.hit_point[rows] = point
     buf.velocity[rows] = acceleration * FRAME  # A acts during the collision frame; irregular ones start at rest
     buf.acceleration[rows] = acceleration
-    buf.target_offset[rows] = splash.offset
+    buf.target_offset[rows] = splash.offset[own]
     buf.age[rows] = 0.0
-    buf.lifetime[rows] = splash.lifetime
-    buf.pattern[rows] = splash.pattern
-    buf.control[rows] = splash.control
-    state.hits_per_pattern += np.bincount(splash.pattern, minlength=len(PATTERNS))
+    buf.lifetime[rows] = splash.lifetime[own]
+    buf.pattern[rows] = splash.pattern[own]
+    buf.control[rows] = splash.control[own]
+    state.hits_per_pattern += np.bincount(splash.pattern[own], minlength=len(PATTERNS))
 
 
 def _send_events(world: World, emitter: int, colliders: list[ColliderEntry], which: NDArray[np.int64],
@@ -503,18 +570,12 @@ def _collide(world: World, emitters: list[_Emitter]) -> None:
     result = sweep(start, end, colliders, allowed)
     hit = np.flatnonzero(result.collider >= 0)
     depth = _penetration(end, hit, result.collider[hit], colliders)
-    splashes, hits = [], []
-    for i, e in enumerate(flying):  # loop over emitters: random draws in each emitter's own stream
-        mine = (hit >= bounds[i]) & (hit < bounds[i + 1])
-        rows = hit[mine]
-        hits.append(rows)
-        if rows.size == 0:
-            splashes.append(None)
-            continue
-        point = start[rows] + result.t[rows, None] * (end[rows] - start[rows])
-        splashes.append(_splash(e.cfg, e.state, e.rng, e.beam[rows - bounds[i]], point, result.normal[rows],
-                                depth[mine]))
-    repulsions = _repulsions(flying, splashes)
+    first = np.searchsorted(hit, bounds)  # flying emitter i's hits: hit[first[i]:first[i + 1]]
+    splash = None
+    if hit.size:
+        point = start[hit] + result.t[hit, None] * (end[hit] - start[hit])
+        splash = _splash(flying, first, hit - bounds[owner[hit]], point, result.normal[hit], depth)
+        acceleration = _accelerations(splash, _repulsions(flying, splash))
     for i, e in enumerate(flying):  # loop over emitters, in entity order: events in a fixed order
         incoming = e.state.particles.velocity[e.beam]
         for index, rows, points in result.triggers:
@@ -523,13 +584,13 @@ def _collide(world: World, emitters: list[_Emitter]) -> None:
             _send_events(world, e.entity, colliders, np.full(local.size, index), points[mine],
                          -incoming[local] / max(e.cfg.beam_speed, _EPS), incoming[local], e.cfg.particle_mass,
                          trigger=True)
-        splash = splashes[i]
-        if splash is None:
+        own = slice(int(first[i]), int(first[i + 1]))
+        if own.start == own.stop:
             continue
-        _land(e.state, splash, repulsions[i])
-        local = hits[i] - bounds[i]
-        _send_events(world, e.entity, colliders, result.collider[hits[i]], splash.point, splash.normal,
-                     incoming[local], e.cfg.particle_mass)
+        _land(e.state, splash, acceleration, own)
+        rows = hit[own]
+        _send_events(world, e.entity, colliders, result.collider[rows], splash.point[own], splash.normal[own],
+                     incoming[rows - bounds[i]], e.cfg.particle_mass)
 
 
 def _step(world: World, emitters: list[_Emitter], dt: float) -> None:
