@@ -63,7 +63,11 @@ class WaterFeature(RenderFeature):
         return out
 
     def _upload(self, item: dict[str, Any]) -> _Buffers:
+        """The item's buffers, written once per frame however many views draw it."""
         buf = self._buffers.setdefault(item["entity"], _Buffers())
+        if item.get("uploaded"):
+            return buf
+        item["uploaded"] = True
         verts, idx = item["vertices"], item["indices"]
         if buf.vbo is None or buf.vbo.size < verts.nbytes or buf.ibo.size < idx.nbytes:
             buf.release()
