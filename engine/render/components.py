@@ -18,7 +18,7 @@ from pydantic import Field, model_validator
 
 from engine.config import Color3, ConfigModel, Vec3, Vec4
 from engine.input import InputState
-from engine.spatial import Transform, quat_from_euler, quat_rotate
+from engine.spatial import Transform, cross, quat_from_euler, quat_rotate
 from engine.world import World
 
 
@@ -182,9 +182,9 @@ def look_at(eye, target, up=(0.0, 1.0, 0.0)) -> np.ndarray:
     eye, target, up = (np.asarray(v, float) for v in (eye, target, up))
     f = target - eye
     f /= np.linalg.norm(f)
-    s = np.cross(f, up)
+    s = cross(f, up)
     s /= np.linalg.norm(s)
-    u = np.cross(s, f)
+    u = cross(s, f)
     m = np.eye(4)
     m[0, :3], m[1, :3], m[2, :3] = s, u, -f
     m[:3, 3] = -m[:3, :3] @ eye

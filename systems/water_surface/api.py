@@ -19,7 +19,7 @@ from components.water_surface import RigidBody, RigidBodyState, WaterState
 from engine.config import ConfigModel, Vec3
 from engine.registry import RegistryError
 from engine.script import Script, script
-from engine.spatial import Transform
+from engine.spatial import Transform, cross
 from engine.world import World
 from systems.water_surface.simulate import add_impulse, add_splash, surface_height
 
@@ -62,7 +62,7 @@ def apply_force(world: World, entity: int, force, point=None, target: int | None
     f = _vec(force, "force")
     state.force = state.force + f
     if point is not None:
-        state.torque = state.torque + np.cross(_vec(point, "point") - world.get(body, Transform).position, f)
+        state.torque = state.torque + cross(_vec(point, "point") - world.get(body, Transform).position, f)
 
 
 def set_velocity(world: World, entity: int, velocity=None, angular_velocity=None, target: int | None = None) -> None:

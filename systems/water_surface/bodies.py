@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from engine.spatial import quat_mul, quat_normalize
+from engine.spatial import cross, quat_mul, quat_normalize
 from systems.water_surface.geometry import BOX, F64, SPHERE, Grid, bilinear, bilinear_with_slope
 
 __all__ = ["BodyArrays", "apply_impulses", "inertia", "integrate", "pool_contacts", "water_forces"]
@@ -144,7 +144,7 @@ def water_forces(bodies: BodyArrays, rot: F64, heights: F64, previous: F64, dt: 
     submerged = sub.sum(axis=1)
     w = (eta - bilinear(previous, uv)) / dt
     water_velocity = np.sum(sub * w, axis=1) / np.where(submerged > 0.0, submerged, 1.0)
-    return force.sum(axis=1), np.cross(offset, force).sum(axis=1), submerged, water_velocity
+    return force.sum(axis=1), cross(offset, force).sum(axis=1), submerged, water_velocity
 
 
 def apply_impulses(bodies: BodyArrays, impulse: F64, angular_impulse: F64) -> None:
@@ -199,7 +199,7 @@ def integrate(bodies: BodyArrays, dt: float, water: tuple | None, linear_drag: f
         bodies.velocity = (bodies.velocity + h * accel) / (1.0 + h * drag)[:, None] * decay_v
         inv = _world_inverse_inertia(rot, moments)
         world_inertia = np.einsum("bij,bj,bkj->bik", rot, moments, rot)
-        gyro = np.cross(bodies.spin, np.einsum("bij,bj->bi", world_inertia, bodies.spin))
+        gyro = cross(bodies.spin, np.einsum("bij,bj->bi", world_inertia, bodies.spin))
         bodies.spin = (bodies.spin + h * np.einsum("bij,bj->bi", inv, torque - gyro)) / (1.0 + h * spin_drag)[:, None]
         bodies.spin *= decay_w
         bodies.position = bodies.position + h * bodies.velocity
@@ -236,11 +236,11 @@ def pool_contacts(bodies: BodyArrays, grid: Grid, floor: float, active: np.ndarr
         return
     arm = np.sum(np.where(touching[..., None], r, 0.0), axis=2) / np.maximum(count, 1)[..., None]  # (B, P, 3)
     n = normals[None, :, :]
-    vc = bodies.velocity[:, None, :] + np.cross(bodies.spin[:, None, :], arm)
+    vc = bodies.velocity[:, None, :] + cross(bodies.spin[:, None, :], arm)
     vn = np.sum(vc * n, axis=-1)
     hit = (count > 0) & (vn < 0.0)
     inv = _world_inverse_inertia(rot, inertia(bodies))
-    k = 1.0 / bodies.mass[:, None] + np.sum(np.cross(np.einsum("bij,bpj->bpi", inv, np.cross(arm, n)), arm) * n, -1)
+    k = 1.0 / bodies.mass[:, None] + np.sum(cross(np.einsum("bij,bpj->bpi", inv, cross(arm, n)), arm) * n, -1)
     jn = np.where(hit, -(1.0 + bodies.restitution[:, None]) * vn / k, 0.0)
     vt = vc - vn[..., None] * n
     speed = np.linalg.norm(vt, axis=-1)
@@ -248,7 +248,7 @@ def pool_contacts(bodies: BodyArrays, grid: Grid, floor: float, active: np.ndarr
     tangent = vt / np.where(speed > 0.0, speed, 1.0)[..., None]
     impulse = jn[..., None] * n - jt[..., None] * tangent  # (B, P, 3)
     bodies.velocity += impulse.sum(axis=1) / bodies.mass[:, None]
-    bodies.spin += np.einsum("bij,bj->bi", inv, np.cross(arm, impulse).sum(axis=1))
+    bodies.spin += np.einsum("bij,bj->bi", inv, cross(arm, impulse).sum(axis=1))
     push = np.max(np.where(touching, depth, 0.0), axis=2)  # (B, P)
     bodies.position = bodies.position + np.einsum("bp,pi->bi", push, normals)
 

@@ -18,7 +18,7 @@ from components.water_surface import (RigidBody, RigidBodyState, WaterState, Wat
 from engine.collider import Collider
 from engine.events import EventReader
 from engine.impacts import Impact
-from engine.spatial import Transform
+from engine.spatial import Transform, cross
 from engine.world import World
 from systems.water_surface.bodies import BodyArrays, apply_impulses, integrate, pool_contacts, quat_to_matrix
 from systems.water_surface.geometry import BOX, SPHERE, Bodies, Grid, bilinear, empty_bodies
@@ -99,7 +99,7 @@ def add_impulse(world: World, entity: int, impulse: np.ndarray, point: np.ndarra
     state.impulse = state.impulse + impulse
     if point is not None:
         arm = point - world.get(entity, Transform).position
-        state.angular_impulse = state.angular_impulse + np.cross(arm, impulse)
+        state.angular_impulse = state.angular_impulse + cross(arm, impulse)
 
 
 def add_splash(world: World, water: int, point: np.ndarray, height: float) -> None:

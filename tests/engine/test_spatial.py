@@ -118,3 +118,13 @@ def test_transform_basis_vectors():
     t = Transform(rotation=quat_from_euler(np.pi / 2, 0.0, 0.0))
     np.testing.assert_allclose(t.forward(), [-1, 0, 0], atol=1e-15)
     np.testing.assert_allclose(t.right(), [0, 0, -1], atol=1e-15)
+
+
+def test_cross_gives_the_bits_of_np_cross_for_any_broadcast():
+    from engine.spatial import cross
+
+    rng = np.random.default_rng(5)
+    for shape_a, shape_b in (((3,), (3,)), ((100, 3), (100, 3)), ((3,), (7, 3)), ((4, 1, 3), (1, 6, 3))):
+        a, b = rng.normal(size=shape_a), rng.normal(size=shape_b)
+        assert np.array_equal(cross(a, b), np.cross(a, b))
+    assert np.array_equal(cross([1, 0, 0], (0, 1, 0)), [0.0, 0.0, 1.0])
