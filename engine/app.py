@@ -25,6 +25,7 @@ from engine.scene import SceneConfig, ScenePlan, plan_scene, read_scene, spawn_p
 from engine.schedule import FRAME_STAGES, TICK_STAGES, FixedClock, Stage
 from engine.script import ScriptRuntime
 from engine.state import Snapshot, restore, snapshot, state_hash
+from engine.threads import limit_blas_threads
 from engine.world import World
 
 log = logging.getLogger("engine")
@@ -44,6 +45,7 @@ class App:
 
     def __init__(self, scene: str | Path | None = None, *, registry: Registry | None = None,
                  seed: int | None = None, strict: bool = False, configs_root: Path | None = None) -> None:
+        limit_blas_threads()  # many small arrays: BLAS threads only contend with the rasteriser (engine/threads.py)
         self.scene_path = Path(scene) if scene is not None else None
         if seed is not None and not (isinstance(seed, int) and 0 <= seed <= MAX_SEED):
             raise ConfigError([Problem("<arguments>", "seed", f"expected an integer in [0, {MAX_SEED}]", seed)])
