@@ -211,7 +211,8 @@ def _advance(cfg: DustDevilConfig, state: DustDevilState, transform: Transform, 
         state.positions = to_local(transform, world)
     state.ages += dt
     u = to_unit(state.positions, size)
-    outside = np.any((u < 0.0) | (u > 1.0), axis=1)
+    out_of_box = (u < 0.0) | (u > 1.0)
+    outside = out_of_box[:, 0] | out_of_box[:, 1] | out_of_box[:, 2]  # np.any(axis=1) is slow over 3 columns
     dead = np.flatnonzero(outside | (state.ages >= state.lifetimes))
     emit(cfg, state, dead, transform, ground, emit_rng)
 

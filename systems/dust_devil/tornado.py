@@ -127,10 +127,12 @@ def sample_wind(grid: F64, unit: F64, mode: str = "nearest") -> F64:
     surrounding grid points.
     """
     dims = np.array(grid.shape[:3])
-    g = np.clip(unit, 0.0, 1.0) * (dims - 1)
+    g = np.clip(unit, 0.0, 1.0)
+    g *= dims - 1
     if mode == "nearest":
-        i = np.rint(g).astype(np.intp)
-        return np.take(grid.reshape(-1, 3), (i[:, 0] * dims[1] + i[:, 1]) * dims[2] + i[:, 2], axis=0)
+        np.rint(g, out=g)  # whole numbers: the flat index below is exact in float64
+        flat = g @ np.array([dims[1] * dims[2], dims[2], 1], dtype=np.float64)
+        return np.take(grid.reshape(-1, 3), flat.astype(np.intp), axis=0)
     if mode != "trilinear":
         raise ValueError(f"unknown lookup mode {mode!r}; expected 'nearest' or 'trilinear'")
     i0 = np.minimum(np.floor(g).astype(np.intp), dims - 2)

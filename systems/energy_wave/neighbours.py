@@ -54,12 +54,16 @@ def in_reach(points: F64, query: F64, radius: float, mask: NDArray[np.bool_] | N
     """Indices of the ``points`` (where ``mask``) inside the queries' bounding box grown by ``radius``."""
     lo = query.min(axis=0) - radius
     hi = query.max(axis=0) + radius
-    inside = np.ones(len(points), dtype=bool) if mask is None else np.array(mask, dtype=bool)
-    for axis in range(3):  # loop over the three axes, vectorized over points
-        column = points[:, axis]
-        inside &= column >= lo[axis]
-        inside &= column <= hi[axis]
-    return np.flatnonzero(inside)
+    column = points[:, 0]
+    inside = column >= lo[0]
+    inside &= column <= hi[0]
+    if mask is not None:
+        inside &= mask
+    found = np.flatnonzero(inside)  # the first axis over every point, the others over its survivors only
+    for axis in (1, 2):
+        column = points[found, axis]
+        found = found[(column >= lo[axis]) & (column <= hi[axis])]
+    return found
 
 
 class _Workspace:

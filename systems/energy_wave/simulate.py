@@ -301,16 +301,9 @@ def _remove_dead(buf: ParticleBuffer, dead: NDArray[np.bool_]) -> int:
     return int(gone.size)
 
 
-def _disc_offsets(rng: np.random.Generator, count: int, radius: float, right: F64, up: F64) -> F64:
-    """Uniform points on the beam's cross-section disc (float64 sin/cos for cross-machine determinism)."""
-    r = radius * np.sqrt(rng.random(count))
-    theta = 2.0 * np.pi * rng.random(count)
-    return (r * np.cos(theta))[:, None] * right + (r * np.sin(theta))[:, None] * up
-
-
-def emit(cfg: EnergyWaveEmitter, state: EnergyWaveState, transform: Transform, rng: np.random.Generator,
-         dt: float) -> int:
-    """Spawn this step's beam particles, spread evenly along the distance the beam covers in one step."""
+def _emission_count(cfg: EnergyWaveEmitter, state: EnergyWaveState, dt: float) -> int:
+    """How many beam particles this step spawns (the rate's fractional carry kept; the excess over the buffer's
+    room counted as dropped); advances the burst clock."""
     rate = (cfg.emission_rate if state.emitting else 0.0)
     burst = min(state.burst_time_left, dt)
     wanted = state.emit_carry + rate * dt + state.burst_rate * burst
@@ -324,25 +317,62 @@ def emit(cfg: EnergyWaveEmitter, state: EnergyWaveState, transform: Transform, r
     if count > room:
         state.dropped += count - room
         count = room
-    if count <= 0:
-        return 0
-    axes = quat_to_matrix(transform.rotation)  # columns: right (+x), up (+y), back (+z)
-    right, up, forward = axes[:, 0], axes[:, 1], -axes[:, 2]
-    phase = (np.arange(count) + rng.random(count)) / count  # stratified over the step
-    s = slice(buf.count, buf.count + count)
-    buf.position[s] = (transform.position + _disc_offsets(rng, count, cfg.beam_radius, right, up)
-                       + (phase * cfg.beam_speed * dt)[:, None] * forward)
-    buf.velocity[s] = cfg.beam_speed * forward
-    buf.hit_point[s] = buf.position[s]
-    buf.acceleration[s] = 0.0
-    buf.target_offset[s] = 0.0
-    buf.age[s] = phase * dt
-    buf.lifetime[s] = cfg.beam_range / cfg.beam_speed
-    buf.pattern[s] = BEAM
-    buf.control[s] = 0
-    buf.count += count
-    state.emitted += count
-    return count
+    return max(count, 0)
+
+
+def _emit(emitters: list[_Emitter], dt: float) -> None:
+    """Spawn this step's beam particles of every emitter, spread evenly along the distance each beam covers in one
+    step and uniformly over the beam's cross-section disc (float64 sin/cos for cross-machine determinism).
+
+    Each emitter draws its stratification phases, then its disc radii and angles from its own stream (the order
+    of one emitter alone); the positions are then computed once for all of them."""
+    spawning, draws = [], []
+    for e in emitters:  # loop over emitters: counts and random draws in each one's own stream
+        count = _emission_count(e.cfg, e.state, dt)
+        if count > 0:
+            spawning.append((e, count))
+            draws.append((e.rng.random(count), e.rng.random(count), e.rng.random(count)))
+    if not spawning:
+        return
+    counts = np.array([count for _, count in spawning])
+    firsts = np.cumsum(counts) - counts
+    axes = [quat_to_matrix(e.transform.rotation) for e, _ in spawning]  # columns: right (+x), up (+y), back (+z)
+    right = np.repeat(np.array([a[:, 0] for a in axes]), counts, axis=0)
+    up = np.repeat(np.array([a[:, 1] for a in axes]), counts, axis=0)
+    forward = np.repeat(np.array([-a[:, 2] for a in axes]), counts, axis=0)
+    u_phase, u_radius, u_angle = (np.concatenate(parts) for parts in zip(*draws))
+    serial = (np.arange(len(u_phase)) - np.repeat(firsts, counts)).astype(np.float64)
+    phase = (serial + u_phase) / np.repeat(counts.astype(np.float64), counts)  # stratified over the step
+    r = _per_row([e.cfg.beam_radius for e, _ in spawning], counts) * np.sqrt(u_radius)
+    theta = 2.0 * np.pi * u_angle
+    disc = (r * np.cos(theta))[:, None] * right + (r * np.sin(theta))[:, None] * up
+    speed = _per_row([e.cfg.beam_speed for e, _ in spawning], counts)
+    position = (np.repeat(np.array([e.transform.position for e, _ in spawning], np.float64), counts, axis=0) + disc
+                + (phase * speed * dt)[:, None] * forward)
+    age = phase * dt
+    for i, (e, count) in enumerate(spawning):  # loop over emitters: each one's own buffer
+        buf, cfg = e.state.particles, e.cfg
+        own = slice(int(firsts[i]), int(firsts[i] + count))
+        s = slice(buf.count, buf.count + count)
+        buf.position[s] = position[own]
+        buf.velocity[s] = cfg.beam_speed * forward[own.start]
+        buf.hit_point[s] = position[own]
+        buf.acceleration[s] = 0.0
+        buf.target_offset[s] = 0.0
+        buf.age[s] = age[own]
+        buf.lifetime[s] = cfg.beam_range / cfg.beam_speed
+        buf.pattern[s] = BEAM
+        buf.control[s] = 0
+        buf.count += count
+        e.state.emitted += count
+
+
+def emit(cfg: EnergyWaveEmitter, state: EnergyWaveState, transform: Transform, rng: np.random.Generator,
+         dt: float) -> int:
+    """Spawn one emitter's beam particles of this step (see :func:`_emit`); returns how many."""
+    before = state.emitted
+    _emit([_Emitter(-1, transform, cfg, state, rng)], dt)
+    return state.emitted - before
 
 
 def _ball(rng: np.random.Generator, count: int) -> F64:
@@ -497,19 +527,26 @@ def _land(state: EnergyWaveState, splash: _Splashes, acceleration: F64, own: sli
 def _send_events(world: World, emitter: int, colliders: list[ColliderEntry], which: NDArray[np.int64],
                  point: F64, normal: F64, velocity: F64, mass: float, trigger: bool = False) -> None:
     """One Impact (solid colliders) and one EnergyWaveHit per collider hit this step: aggregated, not per particle."""
-    for index in np.unique(which):  # loop over the colliders that were hit
-        sel = which == index
-        count = int(sel.sum())
-        mean_point = point[sel].mean(axis=0)
-        mean_normal = normal[sel].sum(axis=0)
+    if len(which) == 0:
+        return
+    single = not (which != which[0]).any()  # the usual case: one collider, every row (no selection copies)
+    for index in which[:1] if single else np.unique(which):  # loop over the colliders that were hit
+        if single:
+            p, n, v = point, normal, velocity
+        else:
+            sel = which == index
+            p, n, v = point[sel], normal[sel], velocity[sel]
+        count = len(p)
+        mean_point = p.mean(axis=0)
+        mean_normal = n.sum(axis=0)
         mean_normal = mean_normal / max(float(np.linalg.norm(mean_normal)), _EPS)
-        impulse = mass * velocity[sel].sum(axis=0)
-        energy = 0.5 * mass * float(np.einsum("ij,ij->", velocity[sel], velocity[sel]))
+        impulse = mass * v.sum(axis=0)
+        energy = 0.5 * mass * float(np.einsum("ij,ij->", v, v))
         target = colliders[int(index)].entity
-        p, i, nn = tuple(map(float, mean_point)), tuple(map(float, impulse)), tuple(map(float, mean_normal))
+        at, i, nn = tuple(map(float, mean_point)), tuple(map(float, impulse)), tuple(map(float, mean_normal))
         if not trigger:
-            world.events.send(Impact(target, p, i, source=emitter, kind="energy_wave"))
-        world.events.send(EnergyWaveHit(emitter, target, p, nn, i, energy, count, trigger))
+            world.events.send(Impact(target, at, i, source=emitter, kind="energy_wave"))
+        world.events.send(EnergyWaveHit(emitter, target, at, nn, i, energy, count, trigger))
 
 
 def _steer_irregular(cfg: EnergyWaveEmitter, state: EnergyWaveState, transform: Transform, dt: float) -> None:
@@ -602,7 +639,7 @@ def _step(world: World, emitters: list[_Emitter], dt: float) -> None:
         buf = e.state.particles
         n = buf.count
         _remove_dead(buf, buf.age[:n] > np.add(buf.lifetime[:n], 1e-9, out=_SCRATCH.get("life", (n,))))
-        emit(e.cfg, e.state, e.transform, e.rng, dt)
+    _emit(emitters, dt)
 
 
 def step_emitter(world: World, entity: int, transform: Transform, cfg: EnergyWaveEmitter, state: EnergyWaveState,
