@@ -26,6 +26,7 @@ spheres drawn with the engine's mesh shader.
 
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -44,6 +45,7 @@ from engine.spatial import Transform
 from systems.dust_devil.simulate import marker_points, world_positions
 
 SHADERS = Path(__file__).parent / "shaders"
+LOG = logging.getLogger(__name__)
 MARKER_COLOR = (0.9, 0.06, 0.04)
 
 
@@ -184,8 +186,8 @@ class DustDevilParticles(RenderFeature):
                     self.renderer.load_program(SHADERS, "pbvr_scatter")
                     self._resolve_vao("pbvr_coverage")
                     self.scatter = True
-                except (RuntimeError, moderngl.Error):
-                    pass  # e.g. no image stores in the vertex stage: the slab path draws the same ensemble
+                except (RuntimeError, moderngl.Error) as exc:  # e.g. no image stores in the vertex stage
+                    LOG.info("dust_devil: PBVR takes the GL 3.3 slab path (the same ensemble, slower): %s", exc)
         return self.scatter and repeats <= MAX_SCATTER_REPEATS
 
     # ------------------------------------------------------------------------------ passes

@@ -247,9 +247,8 @@ class EnergyWaveFeature(RenderFeature):
         view_m = view.view.astype(np.float64)
         bounds = sprite_bounds(data, view.view_proj, view_m[0, :3], view_m[1, :3])
         rects = pass_rects(bounds, size, glow_size, radius, glow > 0.0)
-        if pixel_rect(rects["particles"], *size)[2:] == (0, 0) or 0 in pixel_rect(rects["composite"],
-                                                                                   view.width, view.height)[2:]:
-            return  # every sprite off screen: nothing reaches the image
+        if 0 in pixel_rect(rects["composite"], view.width, view.height)[2:]:
+            return  # every sprite and its glow off screen: nothing reaches the image
         h: dict[str, object] = {}
 
         def sprites_setup(b):
