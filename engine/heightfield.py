@@ -53,16 +53,20 @@ class HeightField:
 
     def height_at(self, x: ArrayLike, z: ArrayLike) -> F64:
         """Bilinear interpolation of the four surrounding samples, clamped at the borders; any broadcast shape."""
-        x, z = np.broadcast_arrays(np.asarray(x, dtype=np.float64), np.asarray(z, dtype=np.float64))
+        x, z = np.asarray(x, dtype=np.float64), np.asarray(z, dtype=np.float64)
+        if x.shape != z.shape:
+            x, z = np.broadcast_arrays(x, z)
         rows, cols = self.heights.shape
         gx = np.clip((x - self.origin[0]) / self.spacing, 0.0, cols - 1)
         gz = np.clip((z - self.origin[1]) / self.spacing, 0.0, rows - 1)
-        c0 = np.minimum(np.floor(gx).astype(np.int64), cols - 2)
-        r0 = np.minimum(np.floor(gz).astype(np.int64), rows - 2)
+        c0 = np.minimum(gx.astype(np.int64), cols - 2)  # gx >= 0, so truncation is the floor
+        r0 = np.minimum(gz.astype(np.int64), rows - 2)
         tx, tz = gx - c0, gz - r0
-        h = self.heights
-        top = h[r0, c0] + tx * (h[r0, c0 + 1] - h[r0, c0])
-        bottom = h[r0 + 1, c0] + tx * (h[r0 + 1, c0 + 1] - h[r0 + 1, c0])
+        flat = self.heights.reshape(-1)  # a view of the contiguous grid
+        i = r0 * cols + c0  # flat gathers: one index array instead of a pair per corner
+        h00, h01, h10, h11 = flat[i], flat[i + 1], flat[i + cols], flat[i + (cols + 1)]
+        top = h00 + tx * (h01 - h00)
+        bottom = h10 + tx * (h11 - h10)
         return top + tz * (bottom - top)
 
     def normal_at(self, x: ArrayLike, z: ArrayLike) -> F64:
