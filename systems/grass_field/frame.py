@@ -1,5 +1,6 @@
-"""One frame of a field for one camera, decided on the CPU (no GL): culling, levels, level-4 orientations,
-the level-5 band and the primitive counts of table 4.  The renderer only uploads and draws this plan.
+"""One frame of a field for one camera, decided on the CPU (no GL): culling, levels, the plants to draw at
+levels 0-3, level-4 orientations, the level-5 band and the primitive counts of table 4.  The renderer only
+uploads and draws this plan.
 """
 
 from __future__ import annotations
@@ -9,12 +10,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from components.grass_field import GrassFieldConfig
-from systems.grass_field.culling import cull_cells
+from systems.grass_field.culling import cull_cells, frustum_planes, visible_plants
 from systems.grass_field.lod import (N_BAND_SIDES, CameraInput, ImpostorOrientation, band_distance,
                                      nearest_views, select_levels, visible_band_sides, wrap_angle)
 from systems.grass_field.simulate import FieldData
 
 __all__ = ["FramePlan", "plan_frame", "band_sector_content"]
+
+NEAR_SORTED_LEVELS = 3
 
 
 @dataclass
@@ -22,8 +25,9 @@ class FramePlan:
     """What to draw this frame."""
 
     levels: np.ndarray  # (C,) level per cell, CULLED (-1) when culled
-    cells: list[np.ndarray]  # cells at geometric levels 0..3
-    impostor_cells: np.ndarray  # (n4,) cells at level 4
+    cells: list[np.ndarray]  # cells at geometric levels 0..3, each list nearest first
+    plants: list[np.ndarray]  # per geometric level: the plants of those cells the frustum can see, in draw order
+    impostor_cells: np.ndarray  # (n4,) cells at level 4, nearest first
     impostor_face: np.ndarray  # (n4,) azimuth each rectangle faces
     impostor_views: np.ndarray  # (n4, 2) cached view indices (second used when blending)
     impostor_blend: np.ndarray  # (n4,) weight of the second view (0 with the paper's swap rule)
@@ -56,6 +60,33 @@ def band_sector_content(data: FieldData, centre_cell: int, apothem: float) -> np
     return (np.abs(wrap_angle(az[None, :] - sides[:, None])) <= margin[None, :]).any(axis=1)
 
 
+def _near_first(levels: np.ndarray, centres: np.ndarray, eye: np.ndarray) -> list[np.ndarray]:
+    """The cells at each geometric level 0-3, nearest first (early depth rejection of what is behind them)."""
+    geometric = np.flatnonzero((levels >= 0) & (levels <= 3))
+    rel = centres[geometric] - eye
+    order = np.lexsort((np.einsum("ij,ij->i", rel, rel), levels[geometric]))  # by level, then by distance
+    ordered = geometric[order]
+    bounds = np.searchsorted(levels[ordered], np.arange(5))
+    return [ordered[bounds[k]:bounds[k + 1]] for k in range(4)]
+
+
+def _plants_to_draw(data: FieldData, cells: list[np.ndarray], camera: CameraInput) -> list[np.ndarray]:
+    """Per geometric level, the plants of its cells that the view frustum can see (see
+    :func:`~systems.grass_field.culling.visible_plants`), in the cells' order; at the near levels (the
+    largest plants on screen) nearest plant first."""
+    placed = data.placed
+    everything = np.concatenate(cells)
+    plants, counts = visible_plants(everything, placed.plants_per_cell, placed.plant_position, data.cell_sphere,
+                                    data.plant_sphere, frustum_planes(camera))
+    plant_ends = np.concatenate([[0], np.cumsum(counts)])[np.cumsum([len(c) for c in cells])]
+    out = np.split(plants, plant_ends[:-1])
+    for k in range(NEAR_SORTED_LEVELS):
+        if len(out[k]) > 1:
+            rel = placed.plant_position[out[k]] - camera.position
+            out[k] = out[k][np.argsort(np.einsum("ij,ij->i", rel, rel), kind="stable")]
+    return out
+
+
 def plan_frame(cfg: GrassFieldConfig, data: FieldData, camera: CameraInput, orientation: ImpostorOrientation,
                *, max_level: int | None = None, band_content=None) -> FramePlan:
     """Cull cells, pick their levels (eq. 1, table 2, level 5 past the band) and update level-4 rectangles.
@@ -75,8 +106,10 @@ def plan_frame(cfg: GrassFieldConfig, data: FieldData, camera: CameraInput, orie
                            thresholds=cfg.level_thresholds, max_level=max_level,
                            merge_distance=cfg.merge_distance, viewer_cell_centre=placed.cell_centre[viewer],
                            keep=keep)
-    cells = [np.flatnonzero(levels == k) for k in range(4)]
-    prims = {k: int(data.cell_primitives[cells[k], k].sum()) for k in range(4)}
+    cells = _near_first(levels, placed.cell_centre, camera.position)
+    plants = _plants_to_draw(data, cells, camera)
+    variant = placed.plant_variant
+    prims = {k: int(data.meshes[k].real_primitives[variant[plants[k]]].sum()) for k in range(4)}
 
     active = levels == 4
     rel = placed.cell_centre[:, [0, 2]] - camera.position[[0, 2]]
@@ -85,6 +118,8 @@ def plan_frame(cfg: GrassFieldConfig, data: FieldData, camera: CameraInput, orie
         to_eye = np.full(len(rel), np.arctan2(-camera.forward[2], -camera.forward[0]))
     orientation.update(to_eye, active, np.radians(cfg.face_turn_deg), np.radians(cfg.image_switch_deg))
     impostors = np.flatnonzero(active)
+    rel_eye = placed.cell_centre[impostors] - camera.position
+    impostors = impostors[np.argsort(np.einsum("ij,ij->i", rel_eye, rel_eye), kind="stable")]  # nearest first
     if cfg.blend_views:
         a, b, w = nearest_views(to_eye[impostors])
         turn = data.cell_turn[impostors]
@@ -104,6 +139,6 @@ def plan_frame(cfg: GrassFieldConfig, data: FieldData, camera: CameraInput, orie
             data, viewer, cfg.merge_distance)
         sides = visible_band_sides(camera, placed.cell_centre[viewer, [0, 2]], cfg.merge_distance) & content
     prims[5] = 2 * int(sides.sum())
-    return FramePlan(levels, cells, impostors, orientation.face[impostors].copy(), views.astype(np.int64),
+    return FramePlan(levels, cells, plants, impostors, orientation.face[impostors].copy(), views.astype(np.int64),
                      blend, viewer, band_cell, sides, prims)
 

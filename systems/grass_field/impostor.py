@@ -33,7 +33,7 @@ __all__ = ["impostor_basis", "TileFrame", "tile_frame", "tile_pixels", "tile_bou
            "band_view_proj", "coverage_mipmaps", "cache_key", "DiskCache", "Progress", "CACHE_FORMAT"]
 
 log = logging.getLogger("grass_field")
-CACHE_FORMAT = 1
+CACHE_FORMAT = 2  # 2: level-3 shading with the specular power as squarings (plant.frag)
 ATLAS_PAD = 4  # texels around each tile (mip levels up to 2 stay inside their tile)
 ATLAS_MIP_LEVELS = 3
 

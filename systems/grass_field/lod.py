@@ -41,6 +41,19 @@ class CameraInput:
         self.forward = f / max(float(np.linalg.norm(f)), 1e-12)
         if self.up is not None:
             self.up = np.asarray(self.up, dtype=np.float64)
+        self._basis: tuple[np.ndarray, np.ndarray] | None = None  # derived once (a camera is not changed)
+        self._half_angle: float | None = None
+
+    def basis(self) -> tuple[np.ndarray, np.ndarray]:
+        """(right, camera up): unit vectors completing ``forward`` (right = forward × up)."""
+        if self._basis is None:
+            f = self.forward
+            up = self.up if self.up is not None else np.array([0.0, 1.0, 0.0])
+            right = _cross(f, up)
+            length = float(np.sqrt(right @ right))
+            right = right / length if length >= 1e-9 else np.array([1.0, 0.0, 0.0])
+            self._basis = (right, _cross(right, f))
+        return self._basis
 
     @property
     def tan_half_fov(self) -> float:
@@ -50,17 +63,17 @@ class CameraInput:
     def corner_rays(self) -> np.ndarray:
         """The four frustum corner directions (4, 3) in world space."""
         f = self.forward
-        up = self.up if self.up is not None else np.array([0.0, 1.0, 0.0])
-        right = np.cross(f, up)
-        if np.linalg.norm(right) < 1e-9:
-            right = np.array([1.0, 0.0, 0.0])
-        right /= np.linalg.norm(right)
-        cam_up = np.cross(right, f)
+        right, cam_up = self.basis()
         tx = np.tan(0.5 * self.fov_x)
         ty = np.tan(0.5 * (self.fov_y if self.fov_y is not None else self.fov_x))
         sx = np.array([-1.0, 1.0, -1.0, 1.0])[:, None]
         sy = np.array([-1.0, -1.0, 1.0, 1.0])[:, None]
         return f[None, :] + sx * tx * right[None, :] + sy * ty * cam_up[None, :]
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product of two 3-vectors (np.cross costs tens of microseconds on vectors this small)."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
 
 
 def camera_from_view(view) -> CameraInput:
@@ -101,8 +114,12 @@ def switch_distances(width: float, length: float, tan_half_fov: float, threshold
 # ------------------------------------------------------------------------------------------- level 5
 def band_normals() -> np.ndarray:
     """Outward unit normals (12, 2) in (x, z) of the band's sides: side k faces azimuth k · 30°."""
-    a = np.arange(N_BAND_SIDES) * (2.0 * np.pi / N_BAND_SIDES)
-    return np.stack([np.cos(a), np.sin(a)], axis=-1)
+    return _BAND_NORMALS.copy()
+
+
+_BAND_ANGLES = np.arange(N_BAND_SIDES) * (2.0 * np.pi / N_BAND_SIDES)
+_BAND_NORMALS = np.stack([np.cos(_BAND_ANGLES), np.sin(_BAND_ANGLES)], axis=-1)
+_BAND_NORMALS.setflags(write=False)
 
 
 def band_distance(points_xz: np.ndarray, centre_xz: np.ndarray) -> np.ndarray:
@@ -111,14 +128,14 @@ def band_distance(points_xz: np.ndarray, centre_xz: np.ndarray) -> np.ndarray:
     A point is outside the band of apothem R around ``centre_xz`` exactly when this is ≥ R.
     """
     rel = np.asarray(points_xz, dtype=np.float64) - np.asarray(centre_xz, dtype=np.float64)
-    return (rel @ band_normals().T).max(axis=-1)
+    return (rel @ _BAND_NORMALS.T).max(axis=-1)
 
 
 def visible_band_sides(camera: CameraInput, centre_xz: np.ndarray, apothem: float) -> np.ndarray:
     """Which of the 12 band sides the camera can see (horizontal angle test); the others are not drawn."""
     if camera.ortho_pixels_per_unit is not None:
         return np.ones(N_BAND_SIDES, dtype=bool)
-    n = band_normals()
+    n = _BAND_NORMALS
     half = apothem * np.tan(np.pi / N_BAND_SIDES)
     tangent = np.stack([-n[:, 1], n[:, 0]], axis=-1)
     mid = np.asarray(centre_xz, dtype=np.float64) + apothem * n
@@ -146,12 +163,15 @@ def wrap_angle(a: np.ndarray) -> np.ndarray:
 
 def _horizontal_half_angle(camera: CameraInput) -> float:
     """Largest azimuth between the forward direction and a frustum corner ray (θ for a level camera)."""
-    fwd = camera.forward[[0, 2]]
-    rays = camera.corner_rays()[:, [0, 2]]
-    ok = np.linalg.norm(rays, axis=1) > 1e-9
-    if not ok.any():
-        return np.pi
-    return float(np.abs(wrap_angle(_azimuth(rays[ok]) - _azimuth(fwd))).max())
+    if camera._half_angle is None:
+        fwd = camera.forward[[0, 2]]
+        rays = camera.corner_rays()[:, [0, 2]]
+        ok = np.einsum("ij,ij->i", rays, rays) > 1e-18
+        if not ok.any():
+            camera._half_angle = float(np.pi)
+        else:
+            camera._half_angle = float(np.abs(wrap_angle(_azimuth(rays[ok]) - _azimuth(fwd))).max())
+    return camera._half_angle
 
 
 def select_levels(centres: np.ndarray, camera: CameraInput, *, length: float, thresholds, max_level: int,
@@ -166,7 +186,8 @@ def select_levels(centres: np.ndarray, camera: CameraInput, *, length: float, th
     if camera.ortho_pixels_per_unit is not None:
         pixels = np.full(len(centres), length * camera.ortho_pixels_per_unit)
     else:
-        distance = np.linalg.norm(centres - camera.position, axis=1)
+        rel = centres - camera.position
+        distance = np.sqrt(np.einsum("ij,ij->i", rel, rel))
         pixels = pseudo_pixels(distance, camera.width, length, camera.tan_half_fov)
     level = np.minimum(level_from_pixels(pixels, thresholds), min(max_level, 4))
     if max_level >= 5 and viewer_cell_centre is not None:

@@ -3,8 +3,9 @@
 Per field and view, one opaque pass draws the :class:`~systems.grass_field.frame.FramePlan` decided on the CPU:
 
 * levels 0-3: one instanced draw per level and primitive type (triangles; lines at level 2; points at level 3).
-  The plant, mesh and cell-list data live in textures; instance ``i`` is plant ``i % n`` of the ``i / n``-th
-  listed cell (see ``shaders/plant.vert``);
+  The plant, mesh and plant-list data live in textures; instance ``i`` is the ``i``-th listed plant (the plan
+  lists, per level, the plants of its cells that the frustum can see, nearest cells first; see
+  ``shaders/plant.vert``);
 * level 4: one instanced draw of all level-4 rectangles; their images come from the LOD cache: each cell
   layout's level-3 grass rendered at 12 views into an RGBA atlas (offscreen framebuffer, transparent
   background) once, before the first frame that needs it, then reused; with ``disk_cache`` the atlas is
@@ -28,6 +29,7 @@ import numpy as np
 from components.grass_field import GrassFieldConfig, GrassFieldState
 from engine.render.feature import OPAQUE, RenderFeature, View
 from engine.render.passes import lighting_uniforms, opaque_setup, set_uniforms
+from engine.render.renderer import shader_source
 from engine.spatial import Transform
 from systems.grass_field.frame import FramePlan, band_sector_content, plan_frame
 from systems.grass_field.impostor import (ATLAS_MIP_LEVELS, AtlasLayout, DiskCache, Progress, atlas_layout,
@@ -44,6 +46,14 @@ SHADERS = Path(__file__).parent / "shaders"
 TEXTURE_WIDTH = 4096
 IMPOSTOR_FLOATS = 8
 MESH_KINDS = (("triangles", moderngl.TRIANGLES, 3), ("lines", moderngl.LINES, 2), ("points", moderngl.POINTS, 1))
+
+
+def _with_defines(source: str, defines: tuple[str, ...]) -> str:
+    """``source`` with ``#define NAME 1`` lines after its ``#version`` line."""
+    if not defines:
+        return source
+    head, _, rest = source.partition("\n")
+    return head + "\n" + "".join(f"#define {name} 1\n" for name in defines) + rest
 
 
 def _data_texture(ctx: moderngl.Context, texels: np.ndarray, dtype: str = "f4") -> moderngl.Texture:
@@ -87,6 +97,7 @@ class _BandEntry:
     bottom: float
     top: float
     content: np.ndarray  # (12,) sides with far cells behind them
+    vertices: np.ndarray | None = None  # (12, 6, 5) the sides' triangles, made on first draw
 
 
 class FieldGpu:
@@ -96,27 +107,30 @@ class FieldGpu:
         self.renderer = renderer
         self.ctx: moderngl.Context = renderer.ctx
         self.cfg, self.state, self.data = cfg, state, data
-        self.plant_prog = renderer.load_program(SHADERS, "plant")
-        self.impostor_prog = renderer.load_program(SHADERS, "impostor")
-        self.band_prog = renderer.load_program(SHADERS, "band")
+        # shader variants, compiled on first use: llvmpipe runs both sides of every branch, so the debug view,
+        # fog and view blending are compiled in only where they are used (see _program)
+        self._vaos: dict[tuple, moderngl.VertexArray] = {}
+        self.plant_prog = self._program("plant")
+        self.impostor_prog = self._program("impostor")
+        self.band_prog = self._program("band")
         placed = data.placed
         ctx = self.ctx
         self.plant_tex = _data_texture(ctx, plant_texels(placed.plant_position, placed.plant_yaw,
                                                          placed.plant_scale, placed.plant_variant, placed.plant_tint))
         self.cell_capacity = max(1, placed.cell_count)
-        self.cell_tex = _data_texture(ctx, np.zeros((self.cell_capacity, 1), np.int32), dtype="i4")
-        self._cell_upload = np.zeros(self.cell_tex.width * self.cell_tex.height, np.int32)
+        # the plants drawn this frame, all geometric levels one after the other (rewritten row by row per frame)
+        self.list_tex = _data_texture(ctx, np.zeros((max(1, len(placed.plant_position)), 1), np.int32), dtype="i4")
+        self._list_upload = np.zeros(self.list_tex.width * self.list_tex.height, np.int32)
         # per level: one vertex texture for all variants, one shared index buffer per primitive type
         self.mesh_tex: dict[int, tuple[moderngl.Texture, int]] = {}
-        self.meshes: dict[tuple[int, str], tuple[moderngl.VertexArray, moderngl.Buffer, int, int]] = {}
+        self.meshes: dict[tuple[int, str], tuple[moderngl.Buffer, int, int]] = {}
         for mesh in data.meshes:
             self.mesh_tex[mesh.level] = (_data_texture(ctx, mesh.vertices.reshape(-1, 4)), mesh.vertices.shape[1])
             for kind, mode, _ in MESH_KINDS:
                 index = getattr(mesh, kind)
                 if len(index):
                     ibo = ctx.buffer(np.ascontiguousarray(index, dtype=np.int32).tobytes())
-                    vao = ctx.vertex_array(self.plant_prog, [], index_buffer=ibo, index_element_size=4)
-                    self.meshes[(mesh.level, kind)] = (vao, ibo, len(index), mode)
+                    self.meshes[(mesh.level, kind)] = (ibo, len(index), mode)
         # level 4: the LOD cache
         self.frame = tile_frame(cfg.cell_size, data.plant_reach, data.plant_height,
                                 np.radians(cfg.impostor_elevation_deg))
@@ -129,9 +143,6 @@ class FieldGpu:
         self.loaded_from_disk = False
         self.disk_path: Path | None = None
         self.impostor_buf = ctx.buffer(reserve=self.cell_capacity * IMPOSTOR_FLOATS * 4)
-        self.impostor_vao = ctx.vertex_array(
-            self.impostor_prog, [(self.impostor_buf, "3f 1f 2f 1f 1f /i", "i_centre", "i_face", "i_tiles",
-                                  "i_blend", "i_level")])
         # level 5: the band
         self.band_entries: OrderedDict[tuple[int, int], _BandEntry] = OrderedDict()
         self.band_layout: AtlasLayout | None = None
@@ -139,10 +150,37 @@ class FieldGpu:
         self.band_fbo: moderngl.Framebuffer | None = None
         self.band_bakes = 0  # viewer cells whose 12 images were captured
         self.band_buf = ctx.buffer(reserve=N_BAND_SIDES * 6 * 5 * 4)
-        self.band_vao = ctx.vertex_array(self.band_prog, [(self.band_buf, "3f 2f", "in_position", "in_uv")])
         self._band_content: dict[int, np.ndarray] = {}
         self.draw_calls = 0  # draw calls of the last draw() (bakes excluded)
         self._released = False
+
+    # ------------------------------------------------------------------------------ programs, arrays
+    def _program(self, name: str, *, debug: bool = False, fog: bool = False) -> moderngl.Program:
+        """``name.vert`` + ``name.frag`` compiled with the defines DEBUG_LEVELS (the debug view), FOG (the view
+        has fog) and, for the level-4 rectangles, BLEND_VIEWS (``blend_views``); shared through the renderer."""
+        defines = tuple(d for d, on in (("DEBUG_LEVELS", debug), ("FOG", fog),
+                                        ("BLEND_VIEWS", name == "impostor" and self.cfg.blend_views)) if on)
+        try:
+            return self.renderer.program(_with_defines(shader_source(SHADERS / f"{name}.vert"), defines),
+                                         _with_defines(shader_source(SHADERS / f"{name}.frag"), defines))
+        except moderngl.Error as exc:
+            raise RuntimeError(f"shader '{name}' {defines} in {SHADERS} failed to compile:\n{exc}") from None
+
+    def _vao(self, prog: moderngl.Program, what: tuple) -> moderngl.VertexArray:
+        """The vertex array of ``what`` (("mesh", level, kind), ("impostor",) or ("band",)) for ``prog``."""
+        key = (prog.glo, *what)
+        vao = self._vaos.get(key)
+        if vao is None:
+            if what[0] == "mesh":
+                ibo = self.meshes[what[1:]][0]
+                vao = self.ctx.vertex_array(prog, [], index_buffer=ibo, index_element_size=4)
+            elif what[0] == "impostor":  # i_level feeds only the debug view: absent from the other variants
+                vao = self.ctx.vertex_array(prog, [(self.impostor_buf, "3f 1f 2f 1f 1f /i", "i_centre", "i_face",
+                                                    "i_tiles", "i_blend", "i_level")], skip_errors=True)
+            else:
+                vao = self.ctx.vertex_array(prog, [(self.band_buf, "3f 2f", "in_position", "in_uv")])
+            self._vaos[key] = vao
+        return vao
 
     # ----------------------------------------------------------------------------------- shared state
     def band_content(self, cell: int) -> np.ndarray:
@@ -163,23 +201,24 @@ class FieldGpu:
 
     def _plant_uniforms(self) -> dict[str, Any]:
         cfg = self.cfg
-        return dict(mesh_tex=0, plant_tex=1, cell_tex=2, plants_per_cell=cfg.plants_per_cell,
+        return dict(mesh_tex=0, plant_tex=1, plant_list=2,
                     stem_color=tuple(cfg.stem_color), leaf_base_color=tuple(cfg.leaf_base_color),
                     leaf_tip_color=tuple(cfg.leaf_tip_color))
 
-    def _draw_level(self, level: int, offset: int, cells: int) -> None:
-        """All plants of ``cells`` listed cells (from ``offset`` in the cell list) at ``level``: one instanced,
-        indexed draw per primitive type."""
-        if cells <= 0:
+    def _draw_level(self, prog: moderngl.Program, level: int, offset: int, plants: int) -> None:
+        """``plants`` listed plants (from ``offset`` in the plant list) at ``level``: one instanced, indexed draw
+        per primitive type."""
+        if plants <= 0:
             return
         tex, verts = self.mesh_tex[level]
         tex.use(0)
-        set_uniforms(self.plant_prog, mesh_verts=verts, cell_offset=offset)
+        prog["mesh_verts"].value = verts
+        prog["list_offset"].value = offset
         for kind, _, _ in MESH_KINDS:
             entry = self.meshes.get((level, kind))
             if entry is not None:
-                vao, _, count, mode = entry
-                vao.render(mode, vertices=count, instances=cells * self.cfg.plants_per_cell)
+                _, count, mode = entry
+                self._vao(prog, ("mesh", level, kind)).render(mode, vertices=count, instances=plants)
                 self.draw_calls += 1
 
     # ------------------------------------------------------------------------------- level 4 (cache)
@@ -228,16 +267,16 @@ class FieldGpu:
         local = np.column_stack([offsets[:, 0], np.zeros(len(offsets)), offsets[:, 1]])
         plants = _data_texture(ctx, plant_texels(local, state.layout_yaw.reshape(-1), state.layout_scale.reshape(-1),
                                                  state.layout_variant.reshape(-1), state.layout_tint.reshape(-1)))
-        cells = _data_texture(ctx, np.arange(layouts, dtype=np.int32)[:, None], dtype="i4")
+        listed = _data_texture(ctx, np.arange(layouts * n, dtype=np.int32)[:, None], dtype="i4")
         try:
             fbo.use()
             fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
             ctx.enable(moderngl.DEPTH_TEST)
             ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
             prog = self.plant_prog
-            set_uniforms(prog, **self._lighting(None), **self._plant_uniforms(), debug_level=-1)
+            set_uniforms(prog, **self._lighting(None), **self._plant_uniforms())
             plants.use(1)
-            cells.use(2)
+            listed.use(2)
             progress = Progress("grass_field: baking the LOD cache", layouts * N_VIEWS)
             for k in range(layouts):
                 for v in range(N_VIEWS):
@@ -247,7 +286,7 @@ class FieldGpu:
                     _, _, normal = impostor_basis(v * 2.0 * np.pi / N_VIEWS, self.frame.elevation)
                     set_uniforms(prog, view_proj=bake_view_proj(v, self.frame).T.astype(np.float32).copy(),
                                  camera_pos=tuple(normal * (2.0 * self.frame.depth + 1.0)))
-                    self._draw_level(3, k, 1)
+                    self._draw_level(prog, 3, k * n, n)
                     self.baked_views += 1
                 progress.update((k + 1) * N_VIEWS)
             fbo.scissor = None
@@ -256,7 +295,7 @@ class FieldGpu:
             fbo.release()
             depth.release()
             plants.release()
-            cells.release()
+            listed.release()
         return np.frombuffer(raw, np.uint8).reshape(h, w, 4).copy()
 
     def _impostor_uniforms(self, view_proj: np.ndarray, eye: np.ndarray, ortho: bool) -> dict[str, Any]:
@@ -374,7 +413,8 @@ class FieldGpu:
         self.ctx.enable(moderngl.DEPTH_TEST)
         self.ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
         prog = self.impostor_prog
-        set_uniforms(prog, **self._lighting(None), debug=0)
+        set_uniforms(prog, **self._lighting(None))
+        vao = self._vao(prog, ("impostor",))
         self.atlas.use(0)
         self.bounds_tex.use(1)
         for side in range(N_BAND_SIDES):
@@ -387,26 +427,36 @@ class FieldGpu:
             vp_mat = band_view_proj(entry.eye, self.cfg.merge_distance, side, entry.bottom, entry.top,
                                     reach + 2.0 * self.data.cell_radius)
             set_uniforms(prog, **self._impostor_uniforms(vp_mat, entry.eye, False), camera_pos=tuple(entry.eye))
-            self.impostor_vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=count)
+            vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=count)
         fbo.scissor = None
 
+    def _band_vertices(self, entry: _BandEntry) -> np.ndarray:
+        """(12, 6, 5) float32: two triangles per band side, position and atlas uv (made once per entry)."""
+        if entry.vertices is None:
+            lay = self.band_layout
+            w, h = lay.size
+            sides = np.arange(N_BAND_SIDES)
+            normal = np.stack([np.cos(sides * 2.0 * np.pi / N_BAND_SIDES), np.sin(sides * 2.0 * np.pi / N_BAND_SIDES)], 1)
+            right = np.stack([-normal[:, 1], normal[:, 0]], axis=1)
+            _, _, half = band_side_frame(entry.eye, self.cfg.merge_distance, 0)
+            mid = entry.eye[[0, 2]] + normal * self.cfg.merge_distance
+            cx = np.array([0, 1, 0, 1, 1, 0], dtype=np.float64)
+            cy = np.array([0, 0, 1, 0, 1, 1], dtype=np.float64)
+            xz = mid[:, None, :] + ((2.0 * cx - 1.0) * half)[None, :, None] * right[:, None, :]
+            tiles = np.array([lay.viewport(entry.slot * N_BAND_SIDES + k) for k in sides], dtype=np.float64)
+            out = np.empty((N_BAND_SIDES, 6, 5), dtype=np.float32)
+            out[..., 0], out[..., 2] = xz[..., 0], xz[..., 1]
+            out[..., 1] = np.where(cy == 0, entry.bottom, entry.top)[None, :]
+            out[..., 3] = (tiles[:, None, 0] + cx[None, :] * tiles[:, None, 2]) / w
+            out[..., 4] = (tiles[:, None, 1] + cy[None, :] * tiles[:, None, 3]) / h
+            entry.vertices = out
+        return entry.vertices
+
     def _band_quads(self, entry: _BandEntry, sides: np.ndarray) -> int:
-        lay = self.band_layout
-        w, h = lay.size
-        quads = []
-        for side in np.flatnonzero(sides):
-            normal, right, half = band_side_frame(entry.eye, self.cfg.merge_distance, int(side))
-            mid = entry.eye + normal * self.cfg.merge_distance
-            x, y, tw, th = lay.viewport(entry.slot * N_BAND_SIDES + int(side))
-            corners = []
-            for cx, cy in ((0, 0), (1, 0), (0, 1), (1, 0), (1, 1), (0, 1)):
-                p = mid + (2 * cx - 1) * half * right
-                p = np.array([p[0], entry.bottom if cy == 0 else entry.top, p[2]])
-                corners.append([*p, (x + cx * tw) / w, (y + cy * th) / h])
-            quads.extend(corners)
-        if quads:
-            self.band_buf.write(np.asarray(quads, np.float32).tobytes())
-        return len(quads)
+        quads = self._band_vertices(entry)[np.asarray(sides, dtype=bool)]
+        if len(quads):
+            self.band_buf.write(quads.tobytes())
+        return 6 * len(quads)
 
     # ---------------------------------------------------------------------------------------- drawing
     def prepare(self, plan: FramePlan, camera: CameraInput) -> None:
@@ -425,57 +475,56 @@ class FieldGpu:
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
         lighting = self._lighting(view)
-        # levels 0-3: one cell list (each level front to back, for early depth rejection), one draw per level
-        # and primitive type
-        counts = [len(c) for c in plan.cells]
-        centres = self.data.placed.cell_centre
-        ordered = [c[np.argsort(np.sum((centres[c] - camera.position) ** 2, axis=1), kind="stable")]
-                   for c in plan.cells]
-        cells = np.concatenate(ordered) if sum(counts) else np.zeros(0, np.int32)
-        if len(cells):
-            self._cell_upload[:len(cells)] = cells
-            self.cell_tex.write(self._cell_upload.tobytes())
-            prog = self.plant_prog
-            set_uniforms(prog, **{**lighting, **self._plant_uniforms()})
+        fog = lighting["fog_density"] > 0.0
+        # levels 0-3: one plant list (each level's plants nearest first, for early depth rejection), one draw
+        # per level and primitive type
+        counts = [len(p) for p in plan.plants]
+        total = sum(counts)
+        if total:
+            self._list_upload[:total] = np.concatenate(plan.plants)
+            width = self.list_tex.width
+            rows = -(-total // width)
+            self.list_tex.write(self._list_upload[:rows * width].tobytes(), viewport=(0, 0, width, rows))
+            prog = self._program("plant", debug=debug, fog=fog)
+            set_uniforms(prog, **lighting, **self._plant_uniforms())
             self.plant_tex.use(1)
-            self.cell_tex.use(2)
+            self.list_tex.use(2)
             offset = 0
             for level, count in enumerate(counts):
-                set_uniforms(prog, debug_level=level if debug else -1)
-                self._draw_level(level, offset, count)
+                if debug and count:
+                    prog["debug_level"].value = level
+                self._draw_level(prog, level, offset, count)
                 offset += count
-        # level 4, front to back (early depth rejection behind nearer rectangles)
-        near_first = np.argsort(np.linalg.norm(self.data.placed.cell_centre[plan.impostor_cells] - camera.position,
-                                               axis=1), kind="stable")
-        count = self._impostor_instances(plan.impostor_cells[near_first], plan.impostor_face[near_first],
-                                         plan.impostor_views[near_first], plan.impostor_blend[near_first], 4)
+        # level 4 (the plan lists the rectangles nearest first)
+        count = self._impostor_instances(plan.impostor_cells, plan.impostor_face, plan.impostor_views,
+                                         plan.impostor_blend, 4)
         if count:
-            prog = self.impostor_prog
-            set_uniforms(prog, **{**lighting, **self._impostor_uniforms(view.view_proj, view.camera_pos, view.ortho),
-                                  "debug": int(debug)})
+            prog = self._program("impostor", debug=debug, fog=fog)
+            set_uniforms(prog, **{**lighting, **self._impostor_uniforms(view.view_proj, view.camera_pos, view.ortho)})
             self.atlas.use(0)
             self.bounds_tex.use(1)
-            self.impostor_vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=count)
+            self._vao(prog, ("impostor",)).render(moderngl.TRIANGLE_STRIP, vertices=4, instances=count)
             self.draw_calls += 1
         # level 5
         if plan.band_cell is not None and plan.band_sides.any():
             entry = self.band_entries[self._band_key(plan.band_cell, float(camera.position[1]))]
             vertices = self._band_quads(entry, plan.band_sides & entry.content)
             if vertices:
-                set_uniforms(self.band_prog, **{**lighting, "band_tex": 0, "debug": int(debug)})
+                prog = self._program("band", debug=debug, fog=fog)
+                set_uniforms(prog, **lighting, band_tex=0)
                 self.band_tex.use(0)
-                self.band_vao.render(moderngl.TRIANGLES, vertices=vertices)
+                self._vao(prog, ("band",)).render(moderngl.TRIANGLES, vertices=vertices)
                 self.draw_calls += 1
 
     def release(self) -> None:
         if self._released:
             return
         self._released = True
-        objects = [self.plant_tex, self.cell_tex, self.impostor_buf, self.impostor_vao, self.bounds_tex,
-                   self.band_buf, self.band_vao, self.atlas, self.band_tex, self.band_fbo,
-                   getattr(self, "band_depth", None)]
+        objects = [self.plant_tex, self.list_tex, self.impostor_buf, self.bounds_tex, self.band_buf, self.atlas,
+                   self.band_tex, self.band_fbo, getattr(self, "band_depth", None)]
+        objects += list(self._vaos.values())  # the programs belong to the renderer (shared between fields)
         objects += [tex for tex, _ in self.mesh_tex.values()]
-        objects += [obj for vao, ibo, _, _ in self.meshes.values() for obj in (vao, ibo)]
+        objects += [ibo for ibo, _, _ in self.meshes.values()]
         for obj in objects:
             if obj is not None:
                 obj.release()

@@ -36,6 +36,8 @@ class FieldData:
     lod_points: np.ndarray  # (C, 3) the point of each cell whose distance enters eq. 1
     cell_variant: np.ndarray  # (C,) layout of each cell
     cell_turn: np.ndarray  # (C,) quarter turns of each cell
+    cell_sphere: tuple[np.ndarray, np.ndarray]  # (C, 3) centres and (C,) radii of spheres bounding each cell
+    plant_sphere: tuple[np.ndarray, float]  # offset (3,) from a plant's base and radius of a sphere bounding it
     key: str = ""  # digest of everything above: equal keys draw the same (survives snapshot / restore copies)
 
     @property
@@ -72,12 +74,18 @@ def field_data(cfg: GrassFieldConfig, state: GrassFieldState, origin: np.ndarray
     reach, tallest = plant_extent(meshes)
     grow = 1.0 + cfg.scale_jitter
     reach, tallest = reach * grow, tallest * grow
+    lowest = min(0.0, min(float(m.vertices[..., 1].min()) for m in meshes) * grow)
     half_diag = cfg.cell_size * np.sqrt(0.5)
+    cell_radius = float(half_diag + reach)
     lod_points = placed.cell_centre + np.array([0.0, 0.5 * tallest, 0.0])
+    bottom, top = placed.cell_ground[:, 0] + lowest, placed.cell_ground[:, 1] + tallest
+    cell_sphere = (np.column_stack([placed.cell_centre[:, 0], 0.5 * (bottom + top), placed.cell_centre[:, 2]]),
+                   np.hypot(cell_radius, 0.5 * (top - bottom)))
+    plant_sphere = (np.array([0.0, 0.5 * (lowest + tallest), 0.0]), float(np.hypot(reach, 0.5 * (tallest - lowest))))
     key = _digest(cfg, state, placed)
     return FieldData(placed, meshes, cell_primitives(placed.plant_variant, cfg.plants_per_cell, meshes),
-                     reach, tallest, float(half_diag + reach), lod_points, state.cell_variant.copy(),
-                     state.cell_turn.copy(), key)
+                     reach, tallest, cell_radius, lod_points, state.cell_variant.copy(),
+                     state.cell_turn.copy(), cell_sphere, plant_sphere, key)
 
 
 def _digest(cfg: GrassFieldConfig, state: GrassFieldState, placed: PlacedField) -> str:

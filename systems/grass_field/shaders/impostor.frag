@@ -2,8 +2,8 @@
 #include "lit.glsl"
 #include "common.glsl"
 // Cached images are premultiplied (transparent background); alpha-tested with coverage-preserving mipmaps.
+// Variants (render.py): BLEND_VIEWS (cross-fade the two nearest views), DEBUG_LEVELS, FOG.
 uniform sampler2D atlas_tex;
-uniform int debug;
 in vec2 v_uv_a;
 in vec2 v_uv_b;
 in float v_blend;
@@ -12,9 +12,16 @@ flat in int v_level;
 out vec4 frag;
 void main() {
     vec4 c = texture(atlas_tex, v_uv_a);
-    if (v_blend > 0.0) c = mix(c, texture(atlas_tex, v_uv_b), v_blend);
+#ifdef BLEND_VIEWS
+    c = mix(c, texture(atlas_tex, v_uv_b), v_blend);
+#endif
     if (c.a < 0.5) discard;
     vec3 col = c.rgb / c.a;
-    if (debug != 0) col = debug_tint(col, v_level);
-    frag = vec4(fog(col, v_fog_pos), 1.0);
+#ifdef DEBUG_LEVELS
+    col = debug_tint(col, v_level);
+#endif
+#ifdef FOG
+    col = fog(col, v_fog_pos);
+#endif
+    frag = vec4(col, 1.0);
 }

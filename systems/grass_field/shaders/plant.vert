@@ -1,15 +1,14 @@
 #version 330
 #include "common.glsl"
-// Levels 0-3 (table 1), instanced: one instance per plant of the cells listed for this level.
-// Instance i draws plant (i % plants_per_cell) of cell cell_tex[cell_offset + i / plants_per_cell]; the indexed vertex
-// comes from the plant's variant: mesh_tex[variant * mesh_verts + gl_VertexID] (2 texels per vertex).
+// Levels 0-3 (table 1), instanced: one instance per plant listed for this level.
+// Instance i draws plant plant_list[list_offset + i]; the indexed vertex comes from the plant's variant:
+// mesh_tex[variant * mesh_verts + gl_VertexID] (2 texels per vertex).
 uniform mat4 view_proj;
 uniform sampler2D mesh_tex;
 uniform int mesh_verts;
 uniform sampler2D plant_tex;   // per plant: (x, y, z, yaw), (scale, variant, tint, 0)
-uniform isampler2D cell_tex;
-uniform int cell_offset;
-uniform int plants_per_cell;
+uniform isampler2D plant_list;
+uniform int list_offset;
 uniform vec3 stem_color;
 uniform vec3 leaf_base_color;
 uniform vec3 leaf_tip_color;
@@ -18,9 +17,7 @@ out vec3 v_normal;
 out vec3 v_albedo;
 flat out float v_kind;
 void main() {
-    int k = gl_InstanceID / plants_per_cell;
-    int cell = fetch_int(cell_tex, cell_offset + k);
-    int plant = cell * plants_per_cell + (gl_InstanceID - k * plants_per_cell);
+    int plant = fetch_int(plant_list, list_offset + gl_InstanceID);
     vec4 p0 = fetch(plant_tex, 2 * plant);
     vec4 p1 = fetch(plant_tex, 2 * plant + 1);
     int vid = int(p1.y + 0.5) * mesh_verts + gl_VertexID;

@@ -6,9 +6,9 @@ import time
 
 import numpy as np
 
-from systems.grass_field.culling import cull_cells
+from systems.grass_field.culling import cull_cells, frustum_planes
 from systems.grass_field.frame import plan_frame
-from systems.grass_field.lod import ImpostorOrientation, select_levels
+from systems.grass_field.lod import CameraInput, ImpostorOrientation, select_levels
 from tests.systems.grass_field.helpers import level_camera, make_field, paper_config
 
 
@@ -81,3 +81,45 @@ def _timed(fn) -> float:
     start = time.perf_counter()
     fn()
     return time.perf_counter() - start
+
+
+def _plant_vertices(data, plant: int, level: int) -> np.ndarray:
+    """World positions of one plant's level mesh (as shaders/plant.vert places them)."""
+    placed = data.placed
+    local = data.meshes[level].vertices[placed.plant_variant[plant], :, :3].astype(np.float64)
+    local = local * placed.plant_scale[plant]
+    c, s = np.cos(placed.plant_yaw[plant]), np.sin(placed.plant_yaw[plant])
+    x, z = local[:, 0] * c - local[:, 2] * s, local[:, 0] * s + local[:, 2] * c
+    return np.column_stack([x, local[:, 1], z]) + placed.plant_position[plant]
+
+
+def test_plants_wholly_outside_the_frustum_are_not_drawn():
+    cfg = paper_config(grid_x=12, grid_z=12, plants_per_cell=20)
+    _, data = make_field(cfg)
+    cam = level_camera((30.0, 30.0, -20.0), 45.0, fov_x_deg=60.0, pitch_deg=-8.0)
+    plan = plan_frame(cfg, data, cam, ImpostorOrientation(data.cell_count), max_level=3)
+    planes = frustum_planes(cam)
+    n = cfg.plants_per_cell
+    dropped_near = 0
+    for level in range(4):
+        listed = (plan.cells[level][:, None] * n + np.arange(n)).reshape(-1)
+        drawn = plan.plants[level]
+        assert len(np.unique(drawn)) == len(drawn) and np.isin(drawn, listed).all()
+        for plant in np.setdiff1d(listed, drawn):  # each dropped plant lies wholly behind one frustum side
+            distance = _plant_vertices(data, plant, level) @ planes[:, :3].T + planes[:, 3]
+            assert (distance < 0.0).all(axis=0).any()
+        if level <= 1:
+            dropped_near += len(listed) - len(drawn)
+    assert dropped_near > 0  # the near cells kept up to twice the view angle are partly off screen
+    assert plan.primitives[3] == int(data.meshes[3].real_primitives[data.placed.plant_variant[plan.plants[3]]].sum())
+
+
+def test_orthographic_views_draw_every_plant_of_the_kept_cells():
+    cfg = paper_config(grid_x=6, grid_z=6, plants_per_cell=5)
+    _, data = make_field(cfg)
+    cam = CameraInput(np.array([0.0, 500.0, 0.0]), np.array([0.0, -1.0, 0.0]), np.pi / 2, 256,
+                      up=np.array([0.0, 0.0, 1.0]), ortho_pixels_per_unit=0.5)
+    plan = plan_frame(cfg, data, cam, ImpostorOrientation(data.cell_count))
+    assert frustum_planes(cam) is None
+    for cells, plants in zip(plan.cells, plan.plants):
+        assert len(plants) == len(cells) * cfg.plants_per_cell
