@@ -109,6 +109,7 @@ class FieldGpu:
         self.cfg, self.state, self.data = cfg, state, data
         # shader variants, compiled on first use: llvmpipe runs both sides of every branch, so the debug view,
         # fog and view blending are compiled in only where they are used (see _program)
+        self._programs: dict[tuple[str, bool, bool], moderngl.Program] = {}
         self._vaos: dict[tuple, moderngl.VertexArray] = {}
         self.plant_prog = self._program("plant")
         self.impostor_prog = self._program("impostor")
@@ -158,13 +159,19 @@ class FieldGpu:
     def _program(self, name: str, *, debug: bool = False, fog: bool = False) -> moderngl.Program:
         """``name.vert`` + ``name.frag`` compiled with the defines DEBUG_LEVELS (the debug view), FOG (the view
         has fog) and, for the level-4 rectangles, BLEND_VIEWS (``blend_views``); shared through the renderer."""
+        key = (name, debug, fog)
+        prog = self._programs.get(key)
+        if prog is not None:
+            return prog
         defines = tuple(d for d, on in (("DEBUG_LEVELS", debug), ("FOG", fog),
                                         ("BLEND_VIEWS", name == "impostor" and self.cfg.blend_views)) if on)
         try:
-            return self.renderer.program(_with_defines(shader_source(SHADERS / f"{name}.vert"), defines),
+            prog = self.renderer.program(_with_defines(shader_source(SHADERS / f"{name}.vert"), defines),
                                          _with_defines(shader_source(SHADERS / f"{name}.frag"), defines))
         except moderngl.Error as exc:
             raise RuntimeError(f"shader '{name}' {defines} in {SHADERS} failed to compile:\n{exc}") from None
+        self._programs[key] = prog
+        return prog
 
     def _vao(self, prog: moderngl.Program, what: tuple) -> moderngl.VertexArray:
         """The vertex array of ``what`` (("mesh", level, kind), ("impostor",) or ("band",)) for ``prog``."""
@@ -476,6 +483,13 @@ class FieldGpu:
         ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
         lighting = self._lighting(view)
         fog = lighting["fog_density"] > 0.0
+        # uploads first: writing a buffer that the frame's pending draws use would make the driver wait
+        rectangles = self._impostor_instances(plan.impostor_cells, plan.impostor_face, plan.impostor_views,
+                                              plan.impostor_blend, 4)
+        band_vertices = 0
+        if plan.band_cell is not None and plan.band_sides.any():
+            entry = self.band_entries[self._band_key(plan.band_cell, float(camera.position[1]))]
+            band_vertices = self._band_quads(entry, plan.band_sides & entry.content)
         # levels 0-3: one plant list (each level's plants nearest first, for early depth rejection), one draw
         # per level and primitive type
         counts = [len(p) for p in plan.plants]
@@ -496,25 +510,20 @@ class FieldGpu:
                 self._draw_level(prog, level, offset, count)
                 offset += count
         # level 4 (the plan lists the rectangles nearest first)
-        count = self._impostor_instances(plan.impostor_cells, plan.impostor_face, plan.impostor_views,
-                                         plan.impostor_blend, 4)
-        if count:
+        if rectangles:
             prog = self._program("impostor", debug=debug, fog=fog)
             set_uniforms(prog, **{**lighting, **self._impostor_uniforms(view.view_proj, view.camera_pos, view.ortho)})
             self.atlas.use(0)
             self.bounds_tex.use(1)
-            self._vao(prog, ("impostor",)).render(moderngl.TRIANGLE_STRIP, vertices=4, instances=count)
+            self._vao(prog, ("impostor",)).render(moderngl.TRIANGLE_STRIP, vertices=4, instances=rectangles)
             self.draw_calls += 1
         # level 5
-        if plan.band_cell is not None and plan.band_sides.any():
-            entry = self.band_entries[self._band_key(plan.band_cell, float(camera.position[1]))]
-            vertices = self._band_quads(entry, plan.band_sides & entry.content)
-            if vertices:
-                prog = self._program("band", debug=debug, fog=fog)
-                set_uniforms(prog, **lighting, band_tex=0)
-                self.band_tex.use(0)
-                self._vao(prog, ("band",)).render(moderngl.TRIANGLES, vertices=vertices)
-                self.draw_calls += 1
+        if band_vertices:
+            prog = self._program("band", debug=debug, fog=fog)
+            set_uniforms(prog, **lighting, band_tex=0)
+            self.band_tex.use(0)
+            self._vao(prog, ("band",)).render(moderngl.TRIANGLES, vertices=band_vertices)
+            self.draw_calls += 1
 
     def release(self) -> None:
         if self._released:
