@@ -126,3 +126,16 @@ def test_rendering_leaves_the_state_alone(tmp_path):
     plain.step(3)
     assert drawn.state_hash() == plain.state_hash()
     assert drawn.world.single(GrassFieldState).placed is not None
+
+
+def test_blended_views_variant_renders_like_the_swap_rule(tmp_path):
+    """blend_views compiles the impostor shader with BLEND_VIEWS (two atlas samples); the image stays close."""
+    grass = SMALL + "grid_x = 12\ngrid_z = 12\n"
+    camera = _camera((0.0, 30.0, 560.0), pitch=-6.0)
+    plain = np.asarray(render_app(_app(tmp_path, grass, camera), 120, 90), np.int16)
+    blended = np.asarray(render_app(_app(tmp_path, grass + "blend_views = true\n", camera, name="b.toml"), 120, 90),
+                         np.int16)
+    for debug in (False, True):  # the debug variant of the blending shader compiles too
+        extra = "debug_levels = true\n" if debug else ""
+        render_app(_app(tmp_path, grass + "blend_views = true\n" + extra, camera, name=f"d{debug}.toml"), 32, 24)
+    assert 0.0 < np.abs(plain - blended).mean() < 6.0  # rectangles differ only where two views are mixed
