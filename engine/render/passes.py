@@ -324,7 +324,7 @@ def tonemap_execute(renderer: Renderer, pc, view: View, ldr_handle) -> None:
     fbo.viewport = (0, 0, view.width, view.height)
     vao = _fullscreen(renderer, "tonemap.frag")
     pc.get(view.color).use(0)
-    set_uniforms(vao.program, hdr=0, exposure=renderer.settings.exposure)
+    set_uniforms(vao.program, hdr=0, exposure=renderer.settings.exposure, origin=(0, 0))
     vao.render(moderngl.TRIANGLES, vertices=3)
 
 
@@ -344,9 +344,9 @@ def present_execute(renderer: Renderer, pc, view: View, final_handle, first: boo
         fbo.clear(*view.extra["border"], 1.0, viewport=(x - 2, y - 2, w + 4, h + 4))
     fbo.viewport = (x, y, w, h)
     if ldr_handle is None:
-        vao = _fullscreen(renderer, "tonemap.frag")
+        vao = _fullscreen(renderer, "tonemap.frag")  # the view's size is the rectangle's: one texel per pixel
         pc.get(view.color).use(0)
-        set_uniforms(vao.program, hdr=0, exposure=renderer.settings.exposure)
+        set_uniforms(vao.program, hdr=0, exposure=renderer.settings.exposure, origin=(x, y))
     else:
         vao = _fullscreen(renderer, "upscale.frag")
         pc.get(ldr_handle).use(0)

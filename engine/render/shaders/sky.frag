@@ -1,20 +1,16 @@
 #version 330
-// Sky gradient with a sun disc, reconstructed per pixel from the inverse view-projection.
-uniform mat4 inv_view_proj;
-uniform vec3 camera_pos;
+// Sky gradient with a sun disc, per pixel from the view ray of sky.vert.
 uniform vec3 sky_top;
 uniform vec3 sky_horizon;
 uniform vec3 sun_dir;
 uniform vec3 sun_color;
-uniform bool ortho;
-uniform vec3 camera_forward;
-in vec2 v_uv;
+in vec3 v_dir;
 out vec4 frag;
 void main() {
-    vec4 far = inv_view_proj * vec4(v_uv * 2.0 - 1.0, 1.0, 1.0);
-    vec3 dir = ortho ? camera_forward : normalize(far.xyz / far.w - camera_pos);
+    vec3 dir = normalize(v_dir);
     float up = clamp(dir.y, 0.0, 1.0);
-    vec3 col = mix(sky_horizon, sky_top, pow(up, 0.6));
+    float q = sqrt(sqrt(up));
+    vec3 col = mix(sky_horizon, sky_top, q * q * sqrt(q));  // up^0.625 by square roots (a pow is exp2·log2)
     col = mix(col, sky_horizon * 0.55, clamp(-dir.y * 3.0, 0.0, 1.0));  // below the horizon
     float s = max(dot(dir, sun_dir), 0.0);
     float s2 = s * s, s4 = s2 * s2;
