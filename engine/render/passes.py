@@ -18,7 +18,7 @@ from engine.builtin import Terrain
 from engine.render.components import Hud, MeshConfig
 from engine.render.feature import OPAQUE, OVERLAY, SKY, RenderFeature, View
 from engine.render.graph import TextureDesc
-from engine.render.terrain import TerrainChunks, build_terrain_chunks, draw_ranges, select_levels
+from engine.render.terrain import TerrainChunks, build_terrain_chunks, draw_ranges, select_levels, shade_texels
 from engine.spatial import Transform, model_matrices
 
 if TYPE_CHECKING:
@@ -108,10 +108,11 @@ class _TerrainMesh:
     vao: moderngl.VertexArray
     vbo: moderngl.Buffer
     ibo: moderngl.Buffer
-    height_range: tuple[float, float]
+    shade: moderngl.Texture  # rgba16f, one texel per grid point: baked diffuse + ambient light × albedo
+    shade_key: tuple = ()  # the light, colours and model rotation it was baked with
 
     def release(self) -> None:
-        for obj in (self.vao, self.vbo, self.ibo):
+        for obj in (self.vao, self.vbo, self.ibo, self.shade):
             obj.release()
 
 
@@ -126,6 +127,7 @@ class TerrainFeature(RenderFeature):
         self._meshes: dict[int, _TerrainMesh] = {}
         self.last_draws: dict[str, int] = {}  # view name -> draw calls issued last frame (tests, profiling)
         self.last_triangles: dict[str, int] = {}
+        self.bakes = 0  # shade textures baked (tests)
 
     def extract(self, world) -> list:
         out = []
@@ -145,10 +147,26 @@ class TerrainFeature(RenderFeature):
         vbo, ibo = self.ctx.buffer(chunks.vertices.tobytes()), self.ctx.buffer(chunks.indices.tobytes())
         vao = self.ctx.vertex_array(prog, [(vbo, "3f 3f 1f", "in_position", "in_normal", "in_skirt")], ibo,
                                     index_element_size=4)
-        h = terrain.field.heights
-        mesh = _TerrainMesh(key, chunks, vao, vbo, ibo, (float(h.min()), float(h.max())))
+        rows, cols = terrain.field.heights.shape
+        shade = self.ctx.texture((cols, rows), 4, dtype="f2")
+        shade.repeat_x = shade.repeat_y = False
+        mesh = _TerrainMesh(key, chunks, vao, vbo, ibo, shade)
         self._meshes[entity] = mesh
         return mesh
+
+    def _bake(self, mesh: _TerrainMesh, terrain: Terrain, model: np.ndarray) -> None:
+        """(Re-)bake the mesh's shade texture when the light, the colours or the model's rotation changed."""
+        r, s = self.renderer, self.renderer.settings
+        light = (tuple(np.round(r.sun_direction, 6)), tuple(r.sun_color), r.ambient, tuple(s.sky_top),
+                 tuple(s.sky_horizon))
+        key = (light, tuple(map(tuple, terrain.config.colors)), tuple(np.round(model[:3, :3], 6).ravel()))
+        if key == mesh.shade_key:
+            return
+        texels = shade_texels(terrain.field, model, terrain.config.colors, r.sun_direction, r.sun_color, r.ambient,
+                              s.sky_top, s.sky_horizon)
+        mesh.shade.write(texels.astype(np.float16).tobytes())
+        mesh.shade_key = key
+        self.bakes += 1
 
     def _program(self) -> moderngl.Program:
         return self.renderer.load_program(SHADERS, "terrain")
@@ -167,16 +185,15 @@ class TerrainFeature(RenderFeature):
             draws = triangles = 0
             for entity, key, terrain, model in data:
                 mesh = self._mesh(entity, key, terrain)
+                self._bake(mesh, terrain, model)
                 levels = select_levels(mesh.chunks, model, view.view_proj, view.proj, view.camera_pos,
                                        view.height, view.ortho, terrain.config.lod_pixels)
                 ranges = draw_ranges(mesh.chunks, levels)
                 if not ranges:
                     continue
-                colors = np.zeros((8, 3), np.float32)
-                ramp = np.array(terrain.config.colors, np.float32)
-                colors[: len(ramp)] = ramp
-                set_uniforms(prog, model=model.T.copy(), ramp=colors, ramp_count=len(ramp),
-                             height_range=mesh.height_range)
+                mesh.shade.use(0)
+                set_uniforms(prog, model=model.T.copy(), shade=0, uv_scale=mesh.chunks.uv_scale,
+                             uv_offset=mesh.chunks.uv_offset)
                 for first, count in ranges:
                     mesh.vao.render(moderngl.TRIANGLES, vertices=count, first=first)
                 draws += len(ranges)

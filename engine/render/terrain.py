@@ -10,16 +10,18 @@ Per view and frame (numpy over chunks, no GL reads):
   and the level's interpolated surface, computed once per chunk and level — projects to at most
   ``detail_pixels`` on screen at the chunk's nearest point (pixels per metre from the projection: constant for
   orthographic views, 1/distance for perspective ones), the screen-space error criterion of geomipmapping
-  (de Boer 2000); its quads must also stay within a multiple of ``detail_pixels`` on screen, so that the
-  per-vertex lighting keeps its detail: ``QUAD_PIXELS_PERSPECTIVE`` (8) in perspective views, and
-  ``QUAD_PIXELS_ORTHOGRAPHIC`` (2) in orthographic ones, which look down on the ground so that a height
-  error moves no pixel and shading detail is all that a coarser level loses;
+  (de Boer 2000).  Shading does not ride on the vertices: diffuse and ambient light are baked per grid point
+  into a texture at the height field's full resolution (:func:`shade_texels`; re-baked when the light or the
+  colours change), so a coarse chunk keeps every bump of its lighting and only its silhouette and depth may
+  move, by at most ``detail_pixels``.  In orthographic top views this lets the flat valley floor drop to a
+  handful of triangles;
 * cracks between neighbours at different levels are hidden by skirts: along every interior chunk edge a strip
   hangs from the edge vertices to copies lowered by the field's largest chunk height range, drawn with the
   edge's colour (the vertex shader lowers a skirt vertex after shading it).
 
-On a software rasteriser the terrain is bound by vertex work (per-vertex lighting, triangle setup), so culling
-and coarser levels cut its cost nearly in proportion to the triangles skipped.
+On a software rasteriser the terrain is bound by triangle setup, which llvmpipe runs on the calling thread, so
+culling and coarser levels cut its cost nearly in proportion to the triangles skipped; the per-pixel texture
+fetch that replaces per-vertex lighting runs on the rasteriser's threads.
 """
 
 from __future__ import annotations
@@ -29,8 +31,6 @@ from dataclasses import dataclass
 import numpy as np
 
 CHUNK = 16  # quads per chunk side; a power of two so that levels 0..log2(CHUNK) all fit exactly
-QUAD_PIXELS_PERSPECTIVE = 8.0  # on-screen quad size allowed per pixel of tolerated error, perspective views
-QUAD_PIXELS_ORTHOGRAPHIC = 2.0  # the same for orthographic (top) views, where height error moves nothing
 VERTEX_FLOATS = 7  # position (3), normal (3), skirt depth (1)
 
 
@@ -46,6 +46,8 @@ class TerrainChunks:
     box_max: np.ndarray  # (chunks, 3)
     error: np.ndarray  # (levels, chunks): largest |height - level's interpolated height| (local units)
     quad_size: float  # grid spacing (local units) of level 0
+    uv_scale: tuple[float, float] = (1.0, 1.0)  # local (x, z) -> shade texture coordinates: x * scale + offset,
+    uv_offset: tuple[float, float] = (0.0, 0.0)  # so that texel centres sit on the grid points
 
     @property
     def levels(self) -> int:
@@ -98,6 +100,49 @@ def _skirt_triangles(edge: np.ndarray, skirt_of: np.ndarray) -> np.ndarray:
     return np.stack([a, b, sa, b, sb, sa], axis=-1).ravel()
 
 
+def grid_normals(field) -> np.ndarray:
+    """(rows, cols, 3) unit normals of a height field's grid points (central differences)."""
+    h = np.asarray(field.heights, np.float64)
+    dz, dx = np.gradient(h, field.spacing)
+    normals = np.stack([-dx, np.ones_like(h), -dz], axis=-1)
+    return normals / np.linalg.norm(normals, axis=-1, keepdims=True)
+
+
+def _smoothstep(e0: float, e1: float, x: np.ndarray) -> np.ndarray:
+    t = np.clip((x - e0) / (e1 - e0), 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+def shade_texels(field, model: np.ndarray, colors, sun_dir, sun_color, ambient: float, sky_top,
+                 sky_horizon) -> np.ndarray:
+    """(rows, cols, 4) float32: the diffuse and ambient light of every grid point times its albedo, as
+    ``lit.glsl``'s ``shade`` computes them (the specular term, view-dependent and small, stays per vertex).
+
+    Albedo: the ``colors`` ramp by the point's height normalised over the field, darkened by 30 % towards rock
+    on slopes (normal·up from 0.85 down to 0.55).  Light: Lambert from the sun plus the hemisphere ambient
+    between ``sky_horizon`` × 0.35 and ``sky_top``.  Normals are turned by the model matrix's upper 3 × 3, as
+    the vertex shader turns them.
+    """
+    h = np.asarray(field.heights, np.float64)
+    ramp = np.asarray(colors, np.float64).reshape(-1, 3)
+    if len(ramp) == 1:
+        ramp = np.concatenate([ramp, ramp])
+    lo, hi = float(h.min()), float(h.max())
+    x = np.clip((h - lo) / max(hi - lo, 1e-4), 0.0, 1.0) * (len(ramp) - 1)
+    i = np.minimum(np.floor(x), len(ramp) - 2).astype(np.int64)
+    albedo = ramp[i] + (ramp[i + 1] - ramp[i]) * (x - i)[..., None]
+    n = grid_normals(field) @ np.asarray(model, np.float64)[:3, :3].T
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    albedo *= (0.7 + 0.3 * _smoothstep(0.55, 0.85, n[..., 1]))[..., None]
+    ndl = np.maximum(n @ np.asarray(sun_dir, np.float64), 0.0)
+    top, horizon = np.asarray(sky_top, np.float64), 0.35 * np.asarray(sky_horizon, np.float64)
+    hemi = (horizon + (top - horizon) * (0.5 * n[..., 1:2] + 0.5)) * float(ambient)
+    lit = albedo * (np.asarray(sun_color, np.float64) * ndl[..., None] + hemi)
+    out = np.ones(h.shape + (4,), np.float32)
+    out[..., :3] = lit
+    return out
+
+
 def build_terrain_chunks(field, chunk: int = CHUNK) -> TerrainChunks:
     """Chunked, multi-level mesh of a :class:`~engine.heightfield.HeightField` (see the module docstring)."""
     h = np.asarray(field.heights, np.float64)
@@ -105,9 +150,7 @@ def build_terrain_chunks(field, chunk: int = CHUNK) -> TerrainChunks:
     xs = field.origin[0] + np.arange(cols) * field.spacing
     zs = field.origin[1] + np.arange(rows) * field.spacing
     gx, gz = np.meshgrid(xs, zs)
-    dz, dx = np.gradient(h, field.spacing)
-    normals = np.stack([-dx, np.ones_like(h), -dz], axis=-1)
-    normals /= np.linalg.norm(normals, axis=-1, keepdims=True)
+    normals = grid_normals(field)
     grid = np.concatenate([np.stack([gx, h, gz], axis=-1), normals, np.zeros((rows, cols, 1))], axis=-1)
     grid = grid.reshape(-1, VERTEX_FLOATS)
 
@@ -152,8 +195,10 @@ def build_terrain_chunks(field, chunk: int = CHUNK) -> TerrainChunks:
     box_min = np.array([[xs[c0], h[r0:r1 + 1, c0:c1 + 1].min(), zs[r0]] for r0, r1, c0, c1 in spans])
     box_max = np.array([[xs[c1], h[r0:r1 + 1, c0:c1 + 1].max(), zs[r1]] for r0, r1, c0, c1 in spans])
     error = np.maximum.accumulate(error, axis=0)  # a coarser level never counts as more exact
+    scale = (1.0 / (field.spacing * cols), 1.0 / (field.spacing * rows))
+    offset = (0.5 / cols - field.origin[0] * scale[0], 0.5 / rows - field.origin[1] * scale[1])
     return TerrainChunks(vertices, np.concatenate(parts).astype(np.uint32), first, count, box_min, box_max,
-                         error, float(field.spacing))
+                         error, float(field.spacing), scale, offset)
 
 
 def _corners(box_min: np.ndarray, box_max: np.ndarray) -> np.ndarray:
@@ -181,15 +226,11 @@ def select_levels(mesh: TerrainChunks, model: np.ndarray, view_proj: np.ndarray,
     lo, hi = world[..., :3].min(axis=1), world[..., :3].max(axis=1)
     nearest = np.clip(np.asarray(camera_pos, np.float64), lo, hi)
     distance = np.linalg.norm(nearest - np.asarray(camera_pos, np.float64), axis=1)
-    scale_xz = float(np.linalg.norm(np.asarray(model, np.float64)[:3, 0]))
     pixels_per_unit = 0.5 * view_height * abs(float(proj[1, 1]))
     if not ortho:
         pixels_per_unit = pixels_per_unit / np.maximum(distance, 1e-3)
-    quad_pixels = mesh.quad_size * scale_xz * pixels_per_unit * (1 << np.arange(mesh.levels))[:, None]
     scale_y = float(np.linalg.norm(np.asarray(model, np.float64)[:3, 1]))
-    error_pixels = mesh.error * scale_y * pixels_per_unit
-    quad_limit = (QUAD_PIXELS_ORTHOGRAPHIC if ortho else QUAD_PIXELS_PERSPECTIVE) * detail_pixels
-    ok = (error_pixels <= detail_pixels) & (quad_pixels <= quad_limit)
+    ok = mesh.error * scale_y * pixels_per_unit <= detail_pixels
     level = np.maximum(np.cumprod(ok, axis=0).sum(axis=0) - 1, 0)
     return np.where(outside, -1, level)
 

@@ -1,26 +1,27 @@
 #version 330
-// Height-field terrain, lit per vertex (Gouraud): a terrain's normals vary smoothly, and per-vertex
-// lighting costs the vertices of the chunks drawn (engine/render/terrain.py) instead of every covered pixel
-// (about 3x cheaper on software rasterisers).  Colour ramp by normalised height, steep slopes darkened towards rock.
+// Height-field terrain (engine/render/terrain.py).  Diffuse and ambient light times the albedo are baked per
+// grid point into the `shade` texture at the field's full resolution, so a chunk drawn at a coarse level keeps
+// its lighting detail; per vertex remain the small view-dependent specular term and the fog, which vary slowly.
 #include "lit.glsl"
 uniform mat4 view_proj;
 uniform mat4 model;
-uniform vec3 ramp[8];
-uniform int ramp_count;
-uniform vec2 height_range;
+uniform vec2 uv_scale;   // local (x, z) -> shade texture coordinates, texel centres on the grid points
+uniform vec2 uv_offset;
 in vec3 in_position;
 in vec3 in_normal;
-in float in_skirt;  // > 0 on skirt vertices: lowered by this much after shading (hides LOD cracks)
-out vec3 v_color;
+in float in_skirt;  // > 0 on skirt vertices: lowered by this much (hides LOD cracks), keeping the edge's shading
+out vec2 v_uv;
+out vec3 v_specular;
+out float v_fog;
 void main() {
     vec4 world = model * vec4(in_position, 1.0);
     vec3 n = normalize(mat3(model) * in_normal);
-    float t = clamp((in_position.y - height_range.x) / max(height_range.y - height_range.x, 1e-4), 0.0, 1.0);
-    float x = t * float(ramp_count - 1);
-    int i = int(min(floor(x), float(ramp_count - 2)));
-    vec3 albedo = mix(ramp[i], ramp[i + 1], x - float(i));
-    albedo = mix(albedo * 0.7, albedo, smoothstep(0.55, 0.85, n.y));
-    v_color = fog(shade(albedo, n, world.xyz, 16.0, 0.03), world.xyz);
+    vec3 h = normalize(normalize(camera_pos - world.xyz) + sun_dir);
+    float spec = max(dot(n, h), 0.0);
+    spec *= spec; spec *= spec; spec *= spec; spec *= spec;  // ^16, lit.glsl's shininess for terrain
+    v_specular = sun_color * (spec * 0.03 * max(dot(n, sun_dir), 0.0));
+    v_fog = clamp(1.0 - exp(-length(camera_pos - world.xyz) * fog_density), 0.0, 1.0);
+    v_uv = in_position.xz * uv_scale + uv_offset;
     world.y -= in_skirt;
     gl_Position = view_proj * world;
 }

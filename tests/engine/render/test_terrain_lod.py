@@ -171,3 +171,77 @@ def test_a_distant_view_draws_far_fewer_triangles_with_lod(tmp_path):
         triangles[lod_pixels] = feature.last_triangles["view0"]
     assert triangles[0.0] >= 2 * 64 * 64  # the whole field is in view at full detail
     assert 0 < triangles[2.0] < 0.5 * triangles[0.0]
+
+
+# ------------------------------------------------------------------ baked shading
+def test_shade_texels_are_the_lit_albedo_of_each_grid_point():
+    from engine.render.terrain import shade_texels
+
+    sun = np.array([0.0, 0.6, 0.8])
+    kw = dict(sun_dir=sun, sun_color=(1.0, 0.9, 0.8), ambient=0.5, sky_top=(0.2, 0.4, 0.8), sky_horizon=(0.6, 0.7, 0.9))
+    flat = shade_texels(HeightField(np.zeros((5, 5)), spacing=1.0), np.eye(4), [(0.5, 0.4, 0.3), (1, 1, 1)], **kw)
+    # normal up: Lambert 0.6, hemisphere all sky_top; height range empty: the ramp's first colour, no rock darkening
+    expected = np.array([0.5, 0.4, 0.3]) * (np.array([1.0, 0.9, 0.8]) * 0.6 + np.array([0.2, 0.4, 0.8]) * 0.5)
+    assert flat.shape == (5, 5, 4) and np.allclose(flat[..., :3], expected, atol=1e-6) and np.all(flat[..., 3] == 1)
+
+    # a 45° slope facing +x (h = -x): normal (1, 1, 0)/√2, rock-darkened by 30 %, the ramp's middle colour at mid-height
+    x = np.arange(5.0)
+    slope = HeightField(np.tile(-x, (5, 1)), spacing=1.0)
+    texels = shade_texels(slope, np.eye(4), [(0.0, 0.0, 0.0), (0.4, 0.4, 0.4), (0.8, 0.8, 0.8)], **kw)
+    n = np.array([1.0, 1.0, 0.0]) / np.sqrt(2)
+    t = (n[1] - 0.55) / 0.3
+    rock = 0.7 + 0.3 * t * t * (3 - 2 * t)  # smoothstep(0.55, 0.85, n.y)
+    hemi = (0.35 * np.array([0.6, 0.7, 0.9]) + (np.array([0.2, 0.4, 0.8]) - 0.35 * np.array([0.6, 0.7, 0.9]))
+            * (0.5 * n[1] + 0.5)) * 0.5
+    light = np.array([1.0, 0.9, 0.8]) * max(n @ sun, 0.0) + hemi
+    assert np.allclose(texels[2, 2, :3], 0.4 * rock * light, atol=1e-6)  # middle of the slope: t = 0.5
+
+
+def test_the_shade_texture_is_baked_once_and_again_when_the_light_changes(tmp_path):
+    scene = tmp_path / "terrain.toml"
+    scene.write_text(SCENE)
+    app = App(scene)
+    renderer = make_renderer(app, 160, 120)
+    feature = next(f for f in renderer.features if isinstance(f, passes.TerrainFeature))
+    first = None
+    for frame in range(5):
+        if frame == 3:
+            renderer.sun_direction = np.array([0.0, 1.0, 0.0], np.float32)
+        app.step(1)
+        app.render_frame()
+        if frame == 0:
+            first = np.asarray(renderer.read_image(), np.float64)
+        assert feature.bakes == (1 if frame < 3 else 2)
+    assert np.abs(np.asarray(renderer.read_image(), np.float64) - first).mean() > 1.0  # the new light shows
+    renderer.release()
+
+
+def test_coarse_levels_keep_the_lighting_detail_of_the_full_grid(tmp_path, monkeypatch):
+    """Straight down in an orthographic view, a chunk's level moves no pixel: with the light baked per grid
+    point, the coarsest level looks like the full grid (per-vertex lighting would lose every bump between the
+    coarse vertices)."""
+    top = SCENE.replace('controller = "orbit"', 'projection = "orthographic"\northo_height = 70.0\ncontroller = "top"')
+    top = top.replace('sky_top = [1.0, 0.0, 1.0]', 'sky_top = [0.2, 0.4, 0.8]')
+    scene = tmp_path / "terrain_top.toml"
+    scene.write_text(top.replace("distance = 38.0", "distance = 60.0"))
+    images = {}
+    for level in ("fine", "coarse"):
+        monkeypatch.setattr(passes, "select_levels",
+                            lambda mesh, *a, level=level, **k: np.full(mesh.chunks, 0 if level == "fine" else mesh.levels - 1))
+        app = App(scene)
+        make_renderer(app, 160, 120)
+        images[level] = np.asarray(render_app(app, frames=1), np.float64)[..., :3]
+    fine, coarse = images["fine"], images["coarse"]
+    assert fine.std() > 5.0  # the bumps show
+    assert np.abs(fine - coarse).mean() < 3.0  # the specular term, per vertex, differs a little
+    assert _detail_correlation(fine, coarse) > 0.9
+
+
+def _detail_correlation(a: np.ndarray, b: np.ndarray) -> float:
+    """Correlation of the fine detail (the image minus its 9 x 9 box blur) of two grey images."""
+    def detail(img):
+        g = img.mean(axis=-1)
+        pad = np.pad(g, 4, mode="edge")
+        blur = sum(pad[i:i + g.shape[0], j:j + g.shape[1]] for i in range(9) for j in range(9)) / 81.0
+        return (g - blur)[8:-8, 8:-8].ravel()
+    return float(np.corrcoef(detail(a), detail(b))[0, 1])
