@@ -16,8 +16,8 @@ Per view and frame (numpy over chunks, no GL reads):
   move, by at most ``detail_pixels``.  In orthographic top views this lets the flat valley floor drop to a
   handful of triangles;
 * cracks between neighbours at different levels are hidden by skirts: along every interior chunk edge a strip
-  hangs from the edge vertices to copies lowered by the field's largest chunk height range, drawn with the
-  edge's colour (the vertex shader lowers a skirt vertex after shading it).
+  hangs from the edge vertices to copies lowered by the largest crack that edge can open (:func:`skirt_depths`),
+  drawn with the edge's shading.
 
 On a software rasteriser the terrain is bound by triangle setup, which llvmpipe runs on the calling thread, so
 culling and coarser levels cut its cost nearly in proportion to the triangles skipped; the per-pixel texture
@@ -93,6 +93,41 @@ def level_error(h: np.ndarray, rows_idx: np.ndarray, cols_idx: np.ndarray, r0: i
     return float(np.abs(block - wr @ coarse @ wc.T).max())
 
 
+def _edge_error(profile: np.ndarray, levels: int) -> float:
+    """Largest |height − its interpolation| along one chunk edge (a 1-D height profile) over every level."""
+    fine = np.arange(len(profile))
+    worst = 0.0
+    for level in range(1, levels):
+        coarse = _lines(0, len(profile) - 1, 1 << level)
+        worst = max(worst, float(np.abs(profile - np.interp(fine, coarse, profile[coarse])).max()))
+    return worst
+
+
+def skirt_depths(h: np.ndarray, row_starts: np.ndarray, col_starts: np.ndarray, levels: int,
+                 margin: float) -> np.ndarray:
+    """(rows, cols) how far each vertex of an interior chunk edge hangs its skirt: the edge's largest crack.
+
+    Along an edge shared by chunks at levels l1 < l2, both sides are linear between the finer level's vertices,
+    where the finer side is exact; so the gap is at most max |h − I_l2(h)| over the edge's vertices, the 1-D
+    interpolation error of the coarser level along that edge.  A skirt that deep (plus ``margin``) closes every
+    crack, and no deeper: tall skirts cost fill (hidden behind the ground, but still rasterised and depth tested).
+    A vertex on two edges (a chunk corner) takes the deeper.
+    """
+    rows, cols = h.shape
+    depth = np.zeros((rows, cols))
+    col_edges = list(col_starts) + [cols - 1]
+    row_edges = list(row_starts) + [rows - 1]
+    for r in row_starts[1:]:  # interior row lines, one segment per chunk column
+        for c0, c1 in zip(col_edges[:-1], col_edges[1:]):
+            seg = np.s_[r, c0:c1 + 1]
+            depth[seg] = np.maximum(depth[seg], _edge_error(h[seg], levels) + margin)
+    for c in col_starts[1:]:
+        for r0, r1 in zip(row_edges[:-1], row_edges[1:]):
+            seg = np.s_[r0:r1 + 1, c]
+            depth[seg] = np.maximum(depth[seg], _edge_error(h[seg], levels) + margin)
+    return depth
+
+
 def _skirt_triangles(edge: np.ndarray, skirt_of: np.ndarray) -> np.ndarray:
     """A strip of two triangles per edge segment, from the edge vertices down to their skirt copies."""
     a, b = edge[:-1], edge[1:]
@@ -163,13 +198,12 @@ def build_terrain_chunks(field, chunk: int = CHUNK) -> TerrainChunks:
     on_line = np.zeros((rows, cols), bool)
     on_line[row_starts[1:], :] = True
     on_line[:, col_starts[1:]] = True
-    ranges = [float(np.ptp(h[r0:r1 + 1, c0:c1 + 1])) for r0, r1, c0, c1 in spans]
-    depth = max(ranges) + field.spacing
+    depth = skirt_depths(h, row_starts, col_starts, levels, margin=0.1 * field.spacing)
     skirt_src = np.flatnonzero(on_line.ravel())
     skirt_of = np.full(rows * cols, -1, np.int64)
     skirt_of[skirt_src] = rows * cols + np.arange(skirt_src.size)
     skirts = grid[skirt_src].copy()
-    skirts[:, 6] = depth
+    skirts[:, 6] = depth.ravel()[skirt_src]
     vertices = np.concatenate([grid, skirts]).astype(np.float32)
 
     shape = (levels, len(spans))

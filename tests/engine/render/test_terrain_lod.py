@@ -245,3 +245,17 @@ def _detail_correlation(a: np.ndarray, b: np.ndarray) -> float:
         blur = sum(pad[i:i + g.shape[0], j:j + g.shape[1]] for i in range(9) for j in range(9)) / 81.0
         return (g - blur)[8:-8, 8:-8].ravel()
     return float(np.corrcoef(detail(a), detail(b))[0, 1])
+
+
+def test_skirts_hang_as_deep_as_the_largest_crack_of_their_edge():
+    from engine.render.terrain import skirt_depths
+
+    h = np.zeros((33, 33))
+    h[16, 5] = 3.0  # a spike on the interior row line 16, inside the first chunk column [0, 16]
+    depth = skirt_depths(h, np.array([0, 16]), np.array([0, 16]), levels=5, margin=0.1)
+    # level 1 already skips column 5: the coarse edge misses the spike by its full height
+    assert np.allclose(depth[16, :17], 3.1) and np.allclose(depth[16, 17:], 0.1)
+    assert np.allclose(depth[:, 16], 0.1 + 3.0 * (np.arange(33) == 16))  # the corner vertex takes the deeper edge
+    assert depth[5, 5] == 0.0  # not on an interior line: no skirt
+    mesh = build_terrain_chunks(HeightField(h, spacing=1.0))
+    assert np.isclose(mesh.vertices[:, 6].max(), 3.0 + 0.1, atol=1e-6)  # was the field's whole height range + 1
