@@ -9,7 +9,7 @@ centre of the box's bottom face and which the entity's ``Transform`` places in t
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import AfterValidator, Field, ValidationInfo, field_validator
@@ -132,7 +132,7 @@ class DustDevilState:
     mouse_dragging: bool = False
     drag_anchor: np.ndarray = field(default_factory=lambda: np.zeros(3))  # world pick point of the mouse drag
     last_drag_tick: int = -10  # world tick of the last drag (mouse or command)
-    wind: np.ndarray | None = field(default=None, metadata={"hash": False})  # (nx, ny, nz, 3) cache, m/s
+    wind: Any = field(default=None, metadata={"hash": False})  # the last step's tornado.WindField (a cache)
 
     @property
     def count(self) -> int:

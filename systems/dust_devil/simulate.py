@@ -19,7 +19,7 @@ from numpy.typing import ArrayLike, NDArray
 from components.dust_devil import DustDevilConfig, DustDevilState
 from engine.heightfield import HeightField
 from engine.spatial import Transform, quat_conjugate, quat_rotate
-from systems.dust_devil.tornado import centre_line, sample_wind, to_unit, wind_grid
+from systems.dust_devil.tornado import WindField, centre_line, to_unit
 
 __all__ = ["Ground", "project_onto_slope", "slope_wind", "step", "rotate_centre_line", "centre_at", "emit", "drag",
            "world_positions", "rotation_steps", "marker_points", "to_world", "to_local"]
@@ -171,18 +171,19 @@ def emit(cfg: DustDevilConfig, state: DustDevilState, which: NDArray[np.intp], t
     state.lifetimes[which] = cfg.particle_lifetime * (1.0 - cfg.lifetime_jitter * draws[:, 3])
 
 
-def _update_wind(cfg: DustDevilConfig, state: DustDevilState) -> F64:
-    state.wind = wind_grid(cfg.grid_resolution, cfg.field_size, state.field_time, state.centre_rotation,
+def _update_wind(cfg: DustDevilConfig, state: DustDevilState) -> WindField:
+    state.wind = WindField(cfg.grid_resolution, cfg.field_size, state.field_time, state.centre_rotation,
                            cfg.wind_scale)
     return state.wind
 
 
-def _velocity(cfg: DustDevilConfig, grid: F64, size: F64, local: F64, h: float) -> F64:
+def _velocity(cfg: DustDevilConfig, wind: WindField, size: F64, local: F64, h: float) -> F64:
     """Field-space wind (m/s) a particle moves with over a substep ``h``: the looked-up vector (euler, 2.1), or
     the one looked up at the half-step point (midpoint)."""
-    v = sample_wind(grid, to_unit(local, size), cfg.lookup)
+    lookups = len(local) * cfg.substeps * (2 if cfg.integrator == "midpoint" else 1)
+    v = wind.sample(to_unit(local, size), cfg.lookup, lookups)
     if cfg.integrator == "midpoint":
-        v = sample_wind(grid, to_unit(local + 0.5 * h * v, size), cfg.lookup)
+        v = wind.sample(to_unit(local + 0.5 * h * v, size), cfg.lookup, lookups)
     return v
 
 
@@ -194,12 +195,12 @@ def _advance(cfg: DustDevilConfig, state: DustDevilState, transform: Transform, 
     state.field_time = float(np.float64(state.field_time) + cfg.time_speed * dt)
     if state.steps % rotation_steps(cfg, dt) == 0:
         rotate_centre_line(cfg, state, rotate_rng)
-    grid = _update_wind(cfg, state)
+    wind = _update_wind(cfg, state)
     size = np.asarray(cfg.field_size)
     h = dt / cfg.substeps
     terrain = ground is not None and cfg.terrain_interaction
     for _ in range(cfg.substeps):
-        v = to_world(transform, _velocity(cfg, grid, size, state.positions, h), direction=True)
+        v = to_world(transform, _velocity(cfg, wind, size, state.positions, h), direction=True)
         world = to_world(transform, state.positions)
         if terrain:
             _, _, world, depth = slope_wind(world, v, h, ground)

@@ -264,11 +264,11 @@ def test_dust_devil_parameters_live_and_particle_count_rebuilds(tmp_path):
     s = Scene(tmp_path, ["dust_devil"], DEVIL.format(count=200, n=8))
     s.app.step(2)
     state = s.get(DustDevilState)
-    assert state.wind.shape == (8, 8, 8, 3)
+    assert state.wind.resolution == (8, 8, 8)
     s.rewrite(DEVIL.format(count=200, n=12))
     assert s.get(DustDevilState) is state and s.get(DustDevilConfig).grid_resolution == (12, 12, 12)
     s.app.step(1)
-    assert state.steps == 3 and state.wind.shape == (12, 12, 12, 3)  # the wind grid follows at the next step
+    assert state.steps == 3 and state.wind.resolution == (12, 12, 12)  # the wind grid follows at the next step
 
     changes = s.rewrite(DEVIL.format(count=300, n=12))
     new = s.get(DustDevilState)

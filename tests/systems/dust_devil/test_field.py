@@ -98,3 +98,25 @@ def test_trilinear_lookup_is_exact_on_grid_points_and_linear_between():
     np.testing.assert_allclose(sample_wind(grid, u, "trilinear"), lin(u), atol=1e-12)
     with pytest.raises(ValueError, match="lookup mode"):
         sample_wind(grid, u, "cubic")
+
+
+def test_the_field_at_the_particles_nodes_is_the_grid_bit_for_bit():
+    """Nearest lookups evaluate the formula at just the needed grid points when the particles are fewer than
+    the grid's points; the values must be the grid's exactly (determinism does not depend on the path)."""
+    from systems.dust_devil.tornado import WindField, wind_at_nodes
+
+    resolution, size = (17, 13, 11), (24.0, 30.0, 20.0)
+    grid = wind_grid(resolution, size, 37.5, 1.3, 1.7)
+    rng = np.random.default_rng(9)
+    nodes = np.stack([rng.integers(0, n, 500) for n in resolution], axis=-1)
+    got = wind_at_nodes(resolution, size, 37.5, 1.3, 1.7, nodes)
+    assert np.array_equal(got, grid[nodes[:, 0], nodes[:, 1], nodes[:, 2]])  # exact, not close
+
+    u = rng.uniform(-0.1, 1.1, (300, 3))
+    few = WindField(resolution, size, 37.5, 1.3, 1.7)
+    v = few.sample(u, "nearest", expected_lookups=600)
+    assert few.evaluated == 300 and few._grid is None  # per point: 300 evaluations, no grid
+    many = WindField(resolution, size, 37.5, 1.3, 1.7)
+    assert np.array_equal(many.sample(u, "nearest", expected_lookups=10_000), v)
+    assert many.evaluated == np.prod(resolution)  # the whole grid once
+    assert np.array_equal(v, sample_wind(grid, u, "nearest"))

@@ -242,7 +242,7 @@ def test_parameters_change_live_and_particle_count_is_structural(tmp_path):
     entity, _, cfg, state = devil(app)
     app.world.add(entity, cfg.model_copy(update={"lookup": "trilinear", "field_size": (30.0, 20.0, 30.0)}))
     app.step(2)  # the same state continues with the new parameters
-    assert state.steps == 4 and state.wind.shape == (16, 16, 16, 3)
+    assert state.steps == 4 and state.wind.resolution == (16, 16, 16) and state.wind.grid.shape == (16, 16, 16, 3)
 
 
 def test_field_space_transforms_match_the_engine_transform():
