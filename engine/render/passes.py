@@ -216,8 +216,10 @@ class TerrainFeature(RenderFeature):
 
 # ------------------------------------------------------------------------- meshes
 @lru_cache(maxsize=None)
-def primitive(shape: str) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices (position, normal; float32) and indices (uint32) of a unit primitive."""
+def primitive(shape: str, segments: tuple[int, int] = (12, 20)) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (position, normal; float32) and indices (uint32) of a unit primitive; ``segments``: a sphere's
+    (stacks, slices), fewer for spheres that stay small on screen (triangle setup is a software rasteriser's
+    cost per triangle, however few pixels it covers)."""
     if shape == "box":
         faces = []
         for axis in range(3):
@@ -233,7 +235,7 @@ def primitive(shape: str) -> tuple[np.ndarray, np.ndarray]:
         idx = (base + np.array([0, 1, 2, 0, 2, 3])).ravel()
         return verts, idx.astype(np.uint32)
     if shape == "sphere":
-        stacks, slices = 12, 20
+        stacks, slices = segments
         phi = np.linspace(0, np.pi, stacks + 1)[:, None]
         theta = np.linspace(0, 2 * np.pi, slices + 1)[None, :]
         n = np.stack([np.sin(phi) * np.cos(theta), np.cos(phi) * np.ones_like(theta),

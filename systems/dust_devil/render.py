@@ -47,6 +47,7 @@ from systems.dust_devil.simulate import marker_points, world_positions
 SHADERS = Path(__file__).parent / "shaders"
 LOG = logging.getLogger(__name__)
 MARKER_COLOR = (0.9, 0.06, 0.04)
+MARKER_SEGMENTS = (8, 12)  # stacks, slices: 192 triangles a marker (the engine's sphere has 480); they stay small
 
 
 @dataclass
@@ -400,7 +401,7 @@ class DustDevilMarkers(RenderFeature):
         needed = max(count, 9) * self.INSTANCE_FLOATS * 4
         if self._gl is None or self._gl[1].size < needed:
             self.release()
-            verts, idx = primitive("sphere")
+            verts, idx = primitive("sphere", MARKER_SEGMENTS)
             inst = self.ctx.buffer(reserve=needed)
             vbo, ibo = self.ctx.buffer(verts.tobytes()), self.ctx.buffer(idx.tobytes())
             prog = self.renderer.load_program(ENGINE_SHADERS, "mesh")
