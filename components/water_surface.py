@@ -186,6 +186,7 @@ class WaterState:
     coefficient: F64 | None = field(default=None, metadata={"hash": False})  # cached 2 − k·degree (eq. 2.8)
     coefficient_k: float = field(default=-1.0, metadata={"hash": False})
     scratch: F64 | None = field(default=None, metadata={"hash": False})  # work array
+    slots: NDArray[np.int64] | None = field(default=None, metadata={"hash": False})  # work array (flat indices)
     section_edges: tuple | None = field(default=None, metadata={"hash": False})  # (polygons, their Edges) cache
     solid_index: tuple | None = field(default=None, metadata={"hash": False})  # (solid, its flat indices) cache
 

@@ -78,6 +78,13 @@ def _scratch(state: WaterState) -> F64:
     return state.scratch
 
 
+def _slots(state: WaterState) -> I64:
+    """An int64 work array of the grid's size kept with the state (for grouping vertex indices)."""
+    if state.slots is None or state.slots.size != state.heights.size:
+        state.slots = np.empty(state.heights.size, np.int64)
+    return state.slots
+
+
 def _water_mean(field: F64, solid: I64 | None) -> float:
     """Mean height of the vertices that are water (all but the flat indices ``solid``)."""
     if solid is None:
@@ -238,7 +245,7 @@ def _outline_step(state, cfg, grid, bodies, sections, levels, plane_y, k, report
     state.solid_index = (state.solid, solid) if len(bodies) == 1 else None
     pairs = coupling_pairs(points, state.solid, grid, solid_mask=True)
     new, new_points = propagate(z, zp, k, state.coefficient, state.degree, solid, pairs, heights, previous,
-                                _scratch(state), reuse=True)
+                                _scratch(state), reuse=True, solid_mask=state.solid, slots=_slots(state))
     # eq. 2.6 / 2.7: a displacement of the point (its height history moves with it, so no velocity is injected)
     new_points += change
     heights = heights + change

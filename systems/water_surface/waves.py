@@ -69,33 +69,46 @@ def neighbour_table(nz: int, nx: int) -> I64:
     return table
 
 
-def _per_vertex_sums(index: I64, size: int, *values: F64) -> tuple:
-    """For every entry of ``index`` (vertices, repeats allowed), each of ``values`` summed over all the entries
-    of the same vertex: no sort and no search for the distinct vertices (a repeated vertex is then simply
-    computed, and written, more than once with the same result)."""
-    return tuple(np.bincount(index, v, size)[index] for v in values)
+def _vertex_groups(touched: I64, slots: I64) -> tuple[I64, I64]:
+    """Group the entries of ``touched`` (flat vertex indices, repeats allowed) by vertex without sorting and
+    without a grid-sized count: (the distinct vertices, in order of their last entry; each entry's group).
+
+    ``slots`` is a grid-sized int64 work array: every vertex's slot is written before it is read, so its old
+    contents never matter."""
+    entry = np.arange(len(touched))
+    slots[touched] = entry
+    last = slots[touched]  # the last entry of each entry's vertex (scatter and gather: no sort)
+    own = last == entry
+    group = np.add.accumulate(own) - 1
+    return touched[own], group[last]
 
 
 def propagate(z: F64, zp: F64, k: float, coefficient: F64, degree: F64, solid: I64 | None = None,
               pairs: tuple = (), points: F64 | None = None, points_prev: F64 | None = None,
-              scratch: F64 | None = None, reuse: bool = False) -> tuple[F64, F64]:
+              scratch: F64 | None = None, reuse: bool = False, solid_mask: np.ndarray | None = None,
+              slots: I64 | None = None) -> tuple[F64, F64]:
     """One step of eq. 2.8–2.12: (grid heights at t+1, added-point heights at t+1).
 
     ``coefficient`` = 2 − k·``degree`` with ``degree`` = :func:`free_degree` (the open grid's neighbour counts);
-    ``solid`` holds the flat indices of vertices inside bodies, which their neighbours do not count; ``pairs`` =
-    (grid vertex, point, weight, point, point, weight) from ``outline.coupling_pairs``. The regular update runs
-    on the whole grid; the vertices next to a body or to added points are then updated again with their own
-    neighbours (eq. 2.11). ``scratch`` (the grid's shape) saves an allocation; with ``reuse`` the result is
-    written over ``zp``, which the caller no longer needs.
+    ``solid`` holds the flat indices of vertices inside bodies, which their neighbours do not count (their own
+    new heights are not meaningful: the caller holds them); ``pairs`` = (grid vertex, point, weight, point,
+    point, weight) from ``outline.coupling_pairs``. The regular update runs on the whole grid; the water vertices
+    next to a body or to added points are then updated again with their own neighbours (eq. 2.11).
+    ``solid_mask`` (the grid's shape, True at ``solid``), ``slots`` (an int64 array of the grid's size) and
+    ``scratch`` (the grid's shape) are work arrays the caller may keep between steps; with ``reuse`` the result
+    is written over ``zp``, which the caller no longer needs.
     """
     nz, nx = z.shape
     zf, zpf = z.ravel(), zp.ravel()
     index, ds, dd = [], [], []
-    if solid is not None and len(solid):  # neighbours lose the vertices inside bodies (reflection)
-        nb = neighbour_table(nz, nx)[solid]
-        real = nb >= 0
-        index.append(nb[real])
-        ds.append(-zf[solid].repeat(4)[real.ravel()])
+    if solid is not None and len(solid):  # water neighbours lose the vertices inside bodies (reflection)
+        if solid_mask is None:
+            solid_mask = np.zeros(z.shape, bool)
+            solid_mask.ravel()[solid] = True
+        nb = neighbour_table(nz, nx)[solid].ravel()
+        water = (nb >= 0) & ~solid_mask.ravel()[nb]
+        index.append(nb[water])
+        ds.append(-zf[solid].repeat(4)[water])
         dd.append(np.full(len(index[-1]), -1.0))
     has_points = points is not None and len(points) > 0
     if has_points:
@@ -104,30 +117,39 @@ def propagate(z: F64, zp: F64, k: float, coefficient: F64, degree: F64, solid: I
         ds.append(w * points[p])
         dd.append(w)
     special = None
-    if index:  # eq. 2.11 at the vertices next to bodies or added points (computed before zp may be overwritten)
+    if index:  # eq. 2.11 at the water vertices next to bodies or added points
         many = len(index) > 1
         touched = np.concatenate(index) if many else index[0]
-        s_extra, d_extra = _per_vertex_sums(touched, z.size, np.concatenate(ds) if many else ds[0],
-                                            np.concatenate(dd) if many else dd[0])
-        around = neighbour_table(nz, nx)[touched]
+        vertices, group = _vertex_groups(touched, np.empty(z.size, np.int64) if slots is None else slots)
+        u = len(vertices)
+        s_extra = np.bincount(group, np.concatenate(ds) if many else ds[0], u)
+        d_extra = np.bincount(group, np.concatenate(dd) if many else dd[0], u)
+        around = neighbour_table(nz, nx)[vertices]
         s_t = sum_of(np.where(around >= 0, zf[around], 0.0), axis=1) + s_extra
-        d_t = degree.ravel()[touched] + d_extra
+        d_t = degree.ravel()[vertices] + d_extra
         lonely = d_t <= 1e-12
         k_t = np.minimum(k, 2.0 / np.where(lonely, 1.0, d_t))  # k·D ≤ 2: stable with the extra neighbours
-        z_t = zf[touched]
-        special = np.where(lonely, z_t, 2.0 * z_t - zpf[touched] + k_t * (s_t - d_t * z_t))
-    # eq. 2.8: z(t+1) = (2 − n·k)·z − z(t−1) + Σ_neighbours k·z_nb, in seven passes over the grid
-    s = np.empty_like(z) if scratch is None else scratch
-    new = zp if reuse else np.empty_like(z)
+        z_t = zf[vertices]
+        special = np.where(lonely, z_t, 2.0 * z_t - zpf[vertices] + k_t * (s_t - d_t * z_t))
+    # eq. 2.8: z(t+1) = (2 − n·k)·z − z(t−1) + Σ_neighbours k·z_nb, in seven contiguous passes over the grid
+    s = scratch if scratch is not None and scratch.flags.c_contiguous else np.empty(z.shape)
+    new = zp if reuse and zp.flags.c_contiguous else np.empty(z.shape)
     np.multiply(coefficient, z, out=s)
     np.subtract(s, zp, out=new)
     np.multiply(z, k, out=s)
-    new[:, 1:] += s[:, :-1]
-    new[:, :-1] += s[:, 1:]
+    flat, sf = new.ravel(), s.ravel()
+    # the ±u neighbours as shifts of the flat arrays (a strided 2-D slice is ~3x slower); the shift carries a
+    # row's end over to the next row's start, so the border column it lands on is put back as it was
+    border = new[:, 0].copy()
+    flat[1:] += sf[:-1]
+    new[:, 0] = border
+    border = new[:, -1].copy()
+    flat[:-1] += sf[1:]
+    new[:, -1] = border
     new[1:, :] += s[:-1, :]
     new[:-1, :] += s[1:, :]
     if special is not None:
-        new.ravel()[touched] = special
+        new.ravel()[vertices] = special
     if not has_points:
         return new, np.zeros(0)
     m = len(points)  # eq. 2.12 at the added points
