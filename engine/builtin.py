@@ -93,8 +93,9 @@ class TerrainConfig(ConfigModel):
     centered: bool = Field(True, description="Centre the terrain on the entity's position.")
     lod_pixels: float = Field(2.0, ge=0.0, le=64.0,
                               description="Level of detail: each chunk is drawn with the coarsest grid whose height "
-                                          "error stays within this many pixels on screen (its quads within 8x that, "
-                                          "2x in top views); 0 draws full detail everywhere.")
+                                          "error stays within this many pixels on screen (lighting is baked per grid "
+                                          "point, so it keeps full detail at every level); 0 draws full detail "
+                                          "everywhere.")
 
     @field_validator("heightmap")
     @classmethod
