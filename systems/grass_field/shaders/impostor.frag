@@ -7,7 +7,7 @@ uniform sampler2D atlas_tex;
 in vec2 v_uv_a;
 in vec2 v_uv_b;
 in float v_blend;
-in vec3 v_fog_pos;
+in float v_fog;
 flat in int v_level;
 out vec4 frag;
 void main() {
@@ -21,7 +21,7 @@ void main() {
     col = debug_tint(col, v_level);
 #endif
 #ifdef FOG
-    col = fog(col, v_fog_pos);
+    col = mix(col, sky_horizon, v_fog);
 #endif
     frag = vec4(col, 1.0);
 }

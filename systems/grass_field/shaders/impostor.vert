@@ -1,4 +1,5 @@
 #version 330
+#include "lit.glsl"
 #include "common.glsl"
 // Level 4: one textured rectangle per cell, instanced. The rectangle faces azimuth i_face (turned by the 15°
 // rule on the CPU) and shows cached view i_tiles.x (i_tiles.y is cross-faded in with weight i_blend when the
@@ -20,7 +21,7 @@ in float i_level;
 out vec2 v_uv_a;
 out vec2 v_uv_b;
 out float v_blend;
-out vec3 v_fog_pos;
+out float v_fog;        // fog factor (lit.glsl's fog) per corner: a rectangle spans little of the fog's range
 flat out int v_level;
 vec2 tile_uv(float tile, vec2 local) {
     int t = int(tile + 0.5);
@@ -39,7 +40,7 @@ void main() {
     vec3 right, up, normal;
     impostor_basis(i_face, elevation, right, up, normal);
     vec3 world = i_centre + ((corner.x * 2.0 - 1.0) * frame.x) * right + mix(frame.y, frame.z, corner.y) * up;
-    v_fog_pos = world;
+    v_fog = clamp(1.0 - exp(-length(camera_pos - world) * fog_density), 0.0, 1.0);
     if (ortho == 0) {
         float d = length(i_centre - eye);
         world = eye + (world - eye) * max(0.05, (d - frame.w) / max(d, 1e-4));
