@@ -4,7 +4,7 @@
 // Variants (render.py): DEBUG_LEVELS, FOG.
 uniform sampler2D band_tex;
 in vec2 v_uv;
-in vec3 v_pos;
+in float v_fog;
 out vec4 frag;
 void main() {
     vec4 c = texture(band_tex, v_uv);
@@ -14,7 +14,7 @@ void main() {
     col = debug_tint(col, 5);
 #endif
 #ifdef FOG
-    col = fog(col, v_pos);
+    col = mix(col, sky_horizon, v_fog);
 #endif
     frag = vec4(col, 1.0);
 }
