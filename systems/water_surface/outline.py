@@ -87,6 +87,14 @@ class Edges:
         c = np.where(real, ns[0] + ns[1], -np.inf)
         return Edges(start, e, n, c, valid, np.where(length2 > 0.0, length2, 1.0))
 
+    def columns(self, v: int) -> Edges:
+        """The first ``v`` ≥ 3 edge slots of every polygon (views): all of the edges of polygons with at most ``v``
+        vertices."""
+        if v >= self.c.shape[1]:
+            return self
+        return Edges(self.start[..., :v], self.e[..., :v], self.n[..., :v], self.c[:, :v], self.valid[:, :v],
+                     self.length2[:, :v])
+
     def inside(self, points: F64, body: I64, margin: float) -> np.ndarray:
         """Whether ``points[p]`` lies inside polygon ``body[p]`` by more than ``margin`` (negative: on or near the
         outline counts too). Polygons with fewer than 3 vertices contain nothing."""
@@ -341,13 +349,11 @@ def outline_impulse(points: AddedPoints, sections: Sections, previous: Sections,
     bi = points.body
     old = (has_previous & (previous.counts >= 3))[bi]
     every = bool(all_of(old, axis=None))
-    back = nearest_on_outline(points.uv, bi, previous.edges)
+    back, raised, lowered = _against_outlines(points.uv, bi, previous.edges, sections.edges)
     if not every:
         back = np.where(old[:, None], back, points.uv)
     gap = points.uv - back
     d = np.hypot(gap[:, 0], gap[:, 1]) * grid.h  # eq. 2.5
-    raised = sections.edges.inside(back, bi, -_ON_OUTLINE)  # N_c(t − 1) inside D'(t)
-    lowered = previous.edges.inside(points.uv, bi, -_ON_OUTLINE)  # N_c(t) inside D'(t − 1)
     if not every:
         raised &= old
         lowered &= old
@@ -355,6 +361,34 @@ def outline_impulse(points: AddedPoints, sections: Sections, previous: Sections,
     nb = len(has_previous)
     mean = np.bincount(bi, change, nb) / np.maximum(np.bincount(bi, minlength=nb), 1)
     return change - mean[bi], d, raised, lowered
+
+
+def _against_outlines(uv: F64, body: I64, before: Edges, after: Edges) -> tuple[F64, np.ndarray, np.ndarray]:
+    """For the added points N_c(t) = ``uv`` of polygons ``body``: N_c(t − 1) (the nearest point of D'(t − 1)),
+    whether N_c(t − 1) lies inside D'(t) and whether N_c(t) lay inside D'(t − 1), the outline counting as inside.
+
+    The (point, edge) arrays are as wide as the polygons are padded: the points of polygons with at most six
+    edges (boxes) are handled apart from those of wider ones (spheres), so they are not padded to a sphere's
+    width (smaller work, and arrays that stay small enough for the allocator to reuse their memory)."""
+    groups = [(None, before, after)]
+    if before.c.shape[1] > _MAX_BOX_VERTICES:
+        used = np.maximum(sum_of(before.valid, axis=1), sum_of(after.valid, axis=1))
+        narrow = (used <= _MAX_BOX_VERTICES)[body]
+        if all_of(narrow, axis=None):
+            groups = [(None, before.columns(_MAX_BOX_VERTICES), after.columns(_MAX_BOX_VERTICES))]
+        elif any_of(narrow, axis=None):
+            groups = [(narrow.nonzero()[0], before.columns(_MAX_BOX_VERTICES), after.columns(_MAX_BOX_VERTICES)),
+                      ((~narrow).nonzero()[0], before, after)]
+    if groups[0][0] is None:
+        back = nearest_on_outline(uv, body, before)
+        return back, after.inside(back, body, -_ON_OUTLINE), before.inside(uv, body, -_ON_OUTLINE)
+    back, raised, lowered = np.empty_like(uv), np.empty(len(uv), bool), np.empty(len(uv), bool)
+    for index, old, new in groups:
+        p, b = uv[index], body[index]
+        back[index] = q = nearest_on_outline(p, b, old)
+        raised[index] = new.inside(q, b, -_ON_OUTLINE)
+        lowered[index] = old.inside(p, b, -_ON_OUTLINE)
+    return back, raised, lowered
 
 
 def _per_point(values: np.ndarray, body: I64, axis: int = 0) -> np.ndarray:
@@ -414,12 +448,13 @@ def solid_vertices(sections: Sections, grid: Grid) -> tuple[I64, I64]:
     return row[run] * grid.nx + i, body[run]
 
 
-_CORNER_OFFSETS = np.array([[0, 0], [1, 0], [0, 1], [1, 1]])  # (i, j) offsets of a square's corners
+_CORNER_U = np.array([0.0, 1.0, 0.0, 1.0])[:, None]  # the corners (i + a, j + b) of a point's square, a, b ∈ {0, 1}
+_CORNER_V = np.array([0.0, 0.0, 1.0, 1.0])[:, None]
 _DENSE_PAIRS = 96  # up to this many added points, their pairs come from the full distance matrix
 
 
-def coupling_pairs(points: AddedPoints, fluid: np.ndarray, grid: Grid,
-                   solid_mask: bool = False) -> tuple[I64, I64, F64, I64, I64, F64]:
+def coupling_pairs(points: AddedPoints, fluid: np.ndarray, grid: Grid, solid_mask: bool = False,
+                   slots: I64 | None = None) -> tuple[I64, I64, F64, I64, I64, F64]:
     """Neighbours within radius h for eq. 2.11 / 2.12, with weights r_k / h = 1 − distance / h.
 
     ``fluid`` marks the water vertices (with ``solid_mask``, it marks the vertices inside bodies instead).
@@ -429,46 +464,57 @@ def coupling_pairs(points: AddedPoints, fluid: np.ndarray, grid: Grid,
     vertex within h of a point is a corner of the point's square. Few points: their pairs come from the full
     distance matrix; many: points within h of each other lie in the same or neighbouring squares, so they are
     found by sorting the points by square and looking up each point's own square and half of the 8 around it
-    (the other half finds it).
+    (the other half finds it). Coordinates are handled one at a time (arrays (4, M), (M,), never (..., 2)).
+    ``slots``: an optional int64 work array of at least (nz + 2)·(nx + 3) entries (its contents do not matter).
     """
     m = len(points)
     if m == 0:
         z = np.zeros(0, np.int64)
         return z, z, np.zeros(0), z, z, np.zeros(0)
-    uv = points.uv
-    base = np.floor(uv).astype(np.int64)
-    corner = base[:, None, :] + _CORNER_OFFSETS  # (M, 4, 2) as (i, j)
-    gap = corner - uv[:, None, :]
-    dist = np.hypot(gap[..., 0], gap[..., 1])
-    ok = (dist < 1.0) & (corner[..., 0] < grid.nx) & (corner[..., 1] < grid.nz)  # points lie on the footprint
-    flat = np.where(ok, corner[..., 1] * grid.nx + corner[..., 0], 0)
+    u, v = np.ascontiguousarray(points.uv.T)
+    fu, fv = np.floor(u), np.floor(v)
+    iu, iv = fu.astype(np.int64), fv.astype(np.int64)
+    cu, cv = fu + _CORNER_U, fv + _CORNER_V  # (4, M) corners of each point's square
+    dist = np.hypot(cu - u, cv - v)
+    ok = (dist < 1.0) & (cu < grid.nx) & (cv < grid.nz)  # points lie on the footprint
+    flat = np.where(ok, (iv * grid.nx + iu) + np.array([0, 1, grid.nx, grid.nx + 1])[:, None], 0)
     if solid_mask:
         ok &= ~fluid.ravel()[flat]
     else:
         ok &= fluid.ravel()[flat]
-    p_idx, c_idx = ok.nonzero()
-    g = flat[p_idx, c_idx]
-    w = 1.0 - dist[p_idx, c_idx]
+    p_idx, c_idx = ok.T.nonzero()  # point by point
+    g = flat[c_idx, p_idx]
+    w = 1.0 - dist[c_idx, p_idx]
     if m <= _DENSE_PAIRS:
-        diff = uv[:, None, :] - uv[None, :, :]
-        dd = np.hypot(diff[..., 0], diff[..., 1])
+        dd = np.hypot(u[:, None] - u[None, :], v[:, None] - v[None, :])
         close = dd < 1.0
         np.fill_diagonal(close, False)
         a, b = close.nonzero()
         return g, p_idx, w, a, b, 1.0 - dd[a, b]
     stride = grid.nx + 3
-    cell = (base[:, 1] + 1) * stride + base[:, 0] + 1
+    cell = (iv + 1) * stride + iu + 1
     order = cell.argsort(kind="stable")
     sorted_cell = cell[order]
-    wanted = (cell[:, None] + _HALF_CELLS[:, 1] * stride + _HALF_CELLS[:, 0]).ravel()
-    lo = np.searchsorted(sorted_cell, wanted, "left")
-    hi = np.searchsorted(sorted_cell, wanted, "right")
-    run, pos = ranges(lo, hi - lo)
-    first = run // len(_HALF_CELLS)
+    wanted = (cell[:, None] + (_HALF_CELLS[:, 1] * stride + _HALF_CELLS[:, 0])).ravel()
+    if slots is None or len(slots) < (grid.nz + 2) * stride:
+        lo = np.searchsorted(sorted_cell, wanted, "left")
+        count = np.searchsorted(sorted_cell, wanted, "right") - lo
+    else:  # the squares' runs in the sorted points looked up through ``slots`` instead of a binary search
+        start = np.empty(m, bool)
+        start[0] = True
+        np.not_equal(sorted_cell[1:], sorted_cell[:-1], out=start[1:])
+        start = start.nonzero()[0]
+        length = np.diff(start, append=m)
+        slots[sorted_cell[start]] = np.arange(len(start))
+        found = np.minimum(np.maximum(slots[wanted], 0), len(start) - 1)  # unwritten slots hold anything
+        hit = sorted_cell[start[found]] == wanted  # true only where the square holds points (so its slot is fresh)
+        lo = start[found]
+        count = np.where(hit, length[found], 0)
+    run, pos = ranges(lo, count)
+    first, around = np.divmod(run, len(_HALF_CELLS))
     second = order[pos]
-    diff = uv[first] - uv[second]
-    dd = np.hypot(diff[:, 0], diff[:, 1])
+    dd = np.hypot(u[first] - u[second], v[first] - v[second])
     # each unordered pair once: across squares from the half neighbourhood, inside a square when first < second
-    close = (dd < 1.0) & ((run % len(_HALF_CELLS) > 0) | (first < second))
+    close = (dd < 1.0) & ((around > 0) | (first < second))
     a, b, weight = first[close], second[close], 1.0 - dd[close]
     return g, p_idx, w, np.concatenate([a, b]), np.concatenate([b, a]), np.concatenate([weight, weight])

@@ -79,9 +79,11 @@ def _scratch(state: WaterState) -> F64:
 
 
 def _slots(state: WaterState) -> I64:
-    """An int64 work array of the grid's size kept with the state (for grouping vertex indices)."""
-    if state.slots is None or state.slots.size != state.heights.size:
-        state.slots = np.empty(state.heights.size, np.int64)
+    """An int64 work array kept with the state, one entry per vertex and per square of the grid padded by a
+    border of squares (for grouping vertex indices and looking up squares)."""
+    nz, nx = state.heights.shape
+    if state.slots is None or state.slots.size != (nz + 2) * (nx + 3):
+        state.slots = np.empty((nz + 2) * (nx + 3), np.int64)
     return state.slots
 
 
@@ -243,7 +245,7 @@ def _outline_step(state, cfg, grid, bodies, sections, levels, plane_y, k, report
     state.solid.ravel()[solid] = True
     # one body: its scanline order is ascending and without repeats, as ``state.solid.nonzero()`` would give
     state.solid_index = (state.solid, solid) if len(bodies) == 1 else None
-    pairs = coupling_pairs(points, state.solid, grid, solid_mask=True)
+    pairs = coupling_pairs(points, state.solid, grid, solid_mask=True, slots=_slots(state))
     new, new_points = propagate(z, zp, k, state.coefficient, state.degree, solid, pairs, heights, previous,
                                 _scratch(state), reuse=True, solid_mask=state.solid, slots=_slots(state))
     # eq. 2.6 / 2.7: a displacement of the point (its height history moves with it, so no velocity is injected)
