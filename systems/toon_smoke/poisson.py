@@ -33,7 +33,14 @@ _SMOOTH_SWEEPS = 2  # red-black Gauss-Seidel sweeps before and after each coarse
 
 @dataclass
 class Level:
-    """One multigrid level: face coefficients, the diagonal and the red/black masks of its active cells."""
+    """One multigrid level: face coefficients, the diagonal and the red/black masks of its active cells.
+
+    The smoother works on a *padded flat* layout: a cell field is stored with a ring of ghost cells as one contiguous
+    vector of ``(nx+2)(ny+2)(nz+2)`` values, so that a neighbour is a fixed offset (±sx, ±sy, ±1) and every stencil
+    term is one contiguous slice (one cheap numpy call, where a 3-D strided view costs several times more on small
+    grids).  The ``*_span`` arrays cover the flat range ``[sx, P − sx)`` (every cell that has all six neighbours in
+    the vector); ghost cells in that range have zero coefficients and stay 0.
+    """
 
     shape: tuple[int, int, int]
     ax: F32  # (nx-1, ny, nz) interior x-face coefficients
@@ -41,17 +48,56 @@ class Level:
     az: F32  # (nx, ny, nz-1)
     faces: tuple[F32, F32, F32]  # full face arrays incl. boundary planes (for coarsening and the velocity update)
     neighbour_coefficients: tuple[F32, ...]  # per cell: A of its −x, +x, −y, +y, −z, +z face (0 on the border)
-    padded: F32  # (nx+2, ny+2, nz+2) scratch: φ with a ring of zero ghosts
     diag: F32
     inv_diag: F32
     red: NDArray[np.bool_]
     black: NDArray[np.bool_]
-    red_inv_diag: F32  # inv_diag on red cells, 0 elsewhere (the Gauss–Seidel half sweeps as arithmetic blends)
-    black_inv_diag: F32
-    keep_red: F32  # 1 where a red half sweep leaves the value alone (black and inactive cells), else 0
-    keep_black: F32
     active: NDArray[np.bool_]
+    flat: _FlatLevel
     dense_inverse: NDArray[np.float64] | None = None  # coarsest level only: pinv of M on the active cells
+    dense_cells: NDArray[np.intp] | None = None  # coarsest level only: padded flat index of each active cell
+
+
+@dataclass
+class _FlatLevel:
+    """The padded flat layout of one level (see :class:`Level`) and its scratch vectors."""
+
+    padded_shape: tuple[int, int, int]
+    offsets: tuple[int, ...]  # flat offset of the −x, +x, −y, +y, −z, +z neighbour
+    span: slice  # [sx, P − sx)
+    coefficients: tuple[F32, ...] | None  # A per neighbour over the span; None: every product A·φ_nb equals φ_nb
+    diag: F32  # over the span (0 on ghosts and inactive cells)
+    red_inv_diag: F32  # 1/diag on active red cells, 0 elsewhere (the half sweeps as arithmetic blends)
+    black_inv_diag: F32
+    keep_red: F32  # 1 where a red half sweep leaves the value alone (black, inactive and ghost cells), else 0
+    keep_black: F32
+    active: NDArray[np.bool_]  # over the span
+    inactive: NDArray[np.bool_]  # over the span
+    x: F32  # (P,) the level's iterate, ghosts 0
+    b: F32  # (P,) the level's right-hand side, ghosts 0
+    r: F32  # (P,) the level's residual (or M φ), ghosts 0
+    s: F32  # span-sized scratch (neighbour sums)
+    t: F32  # span-sized scratch
+    x_span: F32 = field(init=False)
+    b_span: F32 = field(init=False)
+    r_span: F32 = field(init=False)
+    x_neighbours: tuple[F32, ...] = field(init=False)  # x shifted by each offset, over the span
+    x_children: F32 | None = field(init=False)  # x's interior as (nx/2, 2, ny/2, 2, nz/2, 2), for the prolongation
+
+    def __post_init__(self) -> None:
+        lo, hi = self.span.start, self.span.stop
+        self.x_span, self.b_span, self.r_span = self.x[self.span], self.b[self.span], self.r[self.span]
+        self.x_neighbours = tuple(self.x[lo + o:hi + o] for o in self.offsets)
+        nx, ny, nz = (n - 2 for n in self.padded_shape)
+        self.x_children = None
+        if nx % 2 == 0 and ny % 2 == 0 and nz % 2 == 0:
+            children = self.interior(self.x).reshape(nx // 2, 2, ny // 2, 2, nz // 2, 2)
+            assert np.shares_memory(children, self.x)  # a view: the prolongation adds in place
+            self.x_children = children
+
+    def interior(self, vector: F32) -> F32:
+        """The (nx, ny, nz) view of the real cells of a padded flat vector."""
+        return vector.reshape(self.padded_shape)[1:-1, 1:-1, 1:-1]
 
 
 @dataclass
@@ -111,11 +157,48 @@ def _make_level(ax: F32, ay: F32, az: F32) -> Level:
             c[tuple(border)] = 0.0  # the ghost beyond an open face holds φ = 0: only the diagonal sees that face
             neighbours.append(c)
     f32 = np.float32
+    flat = _flat_level((nx, ny, nz), tuple(neighbours), diag, (inv_diag * red).astype(f32),
+                       (inv_diag * black).astype(f32), (~red).astype(f32), (~black).astype(f32), active)
     return Level((nx, ny, nz), np.ascontiguousarray(ax[1:-1]), np.ascontiguousarray(ay[:, 1:-1]),
-                 np.ascontiguousarray(az[:, :, 1:-1]), (ax, ay, az), tuple(neighbours),
-                 np.zeros((nx + 2, ny + 2, nz + 2), f32), diag, inv_diag.astype(f32), red, black,
-                 (inv_diag * red).astype(f32), (inv_diag * black).astype(f32), (~red).astype(f32),
-                 (~black).astype(f32), active)
+                 np.ascontiguousarray(az[:, :, 1:-1]), (ax, ay, az), tuple(neighbours), diag, inv_diag.astype(f32),
+                 red, black, active, flat)
+
+
+def _flat_level(shape: tuple[int, int, int], neighbours: tuple[F32, ...], diag: F32, red_inv_diag: F32,
+                black_inv_diag: F32, keep_red: F32, keep_black: F32, active: NDArray[np.bool_]) -> _FlatLevel:
+    """Cell fields of one level in the padded flat layout (ghosts: zero coefficients, keep 1, inactive).
+
+    The neighbour coefficients are dropped (``coefficients=None``) when every product A_f·φ_nb equals φ_nb
+    exactly: A_f = 1, or A_f = 0 towards a ghost or an inactive cell, both of which hold φ = 0 (or this cell is
+    inactive, where the sum is never used).  That is every fine level (faces are 0 or 1, inactive cells are solid)
+    and every coarse level without obstacles; the stencil is then five additions instead of six products and five
+    additions, with the same bits.
+    """
+    nx, ny, nz = shape
+    padded_shape = (nx + 2, ny + 2, nz + 2)
+    size = padded_shape[0] * padded_shape[1] * padded_shape[2]
+    sy, sx = nz + 2, (ny + 2) * (nz + 2)
+    span = slice(sx, size - sx)
+
+    def to_span(values, fill=0.0, dtype=np.float32):
+        out = np.full(padded_shape, fill, dtype)
+        out[1:-1, 1:-1, 1:-1] = values
+        return out.reshape(-1)[span].copy()
+
+    active_span = to_span(active, False, bool)
+    offsets = (-sx, sx, -sy, sy, -1, 1)
+    padded_active = np.zeros(size, bool)
+    padded_active.reshape(padded_shape)[1:-1, 1:-1, 1:-1] = active
+    exact = True
+    coefficients = tuple(to_span(c) for c in neighbours)
+    for c, offset in zip(coefficients, offsets):  # loop over the six neighbours
+        neighbour_active = padded_active[sx + offset:size - sx + offset]
+        exact &= bool(np.all((c == 1.0) | ((c == 0.0) & ~(active_span & neighbour_active))))
+    return _FlatLevel(padded_shape, offsets, span, None if exact else coefficients, to_span(diag),
+                      to_span(red_inv_diag), to_span(black_inv_diag), to_span(keep_red, 1.0),
+                      to_span(keep_black, 1.0), active_span, ~active_span, np.zeros(size, np.float32),
+                      np.zeros(size, np.float32), np.zeros(size, np.float32), np.zeros(size - 2 * sx, np.float32),
+                      np.zeros(size - 2 * sx, np.float32))
 
 
 def _coarsen(level: Level) -> Level:
@@ -158,77 +241,101 @@ def build_hierarchy(solid: NDArray[np.bool_], open_faces: tuple[bool, ...]) -> P
         raise ValueError(f"grid {levels[0].shape} cannot be coarsened below {level.shape}: use sides that are "
                          "multiples of 8")
     level.dense_inverse = np.linalg.pinv(_dense_operator(level)) if level.active.any() else np.zeros((0, 0))
+    padded_index = np.arange(level.flat.x.size).reshape(level.flat.padded_shape)[1:-1, 1:-1, 1:-1]
+    level.dense_cells = padded_index[level.active]  # C order, as the rows of the dense operator
     return PoissonHierarchy(levels, singular=not any(open_faces), fluid_weight=(~solid).astype(np.float32))
 
 
-def _neighbour_sum(level: Level, phi: F32) -> F32:
-    """Σ_f A_f φ_nb(f) over the interior faces (ghost cells beyond the domain hold 0)."""
-    buf = level.padded
-    buf[1:-1, 1:-1, 1:-1] = phi
-    cxm, cxp, cym, cyp, czm, czp = level.neighbour_coefficients
-    s = cxm * buf[:-2, 1:-1, 1:-1]
-    s += cxp * buf[2:, 1:-1, 1:-1]
-    s += cym * buf[1:-1, :-2, 1:-1]
-    s += cyp * buf[1:-1, 2:, 1:-1]
-    s += czm * buf[1:-1, 1:-1, :-2]
-    s += czp * buf[1:-1, 1:-1, 2:]
+def _neighbour_sum(flat: _FlatLevel) -> F32:
+    """Σ_f A_f φ_nb(f) over the span of the level's iterate ``flat.x`` (ghosts hold 0), in the order −x, +x, −y, +y,
+    −z, +z; written into (and returned as) ``flat.s``."""
+    s, views = flat.s, flat.x_neighbours
+    if flat.coefficients is None:
+        np.add(views[0], views[1], out=s)
+        for view in views[2:]:  # loop over the stencil's terms, each one call over the whole grid
+            s += view
+        return s
+    np.multiply(flat.coefficients[0], views[0], out=s)
+    for coefficient, view in zip(flat.coefficients[1:], views[1:]):  # loop over the stencil's terms
+        np.multiply(coefficient, view, out=flat.t)
+        s += flat.t
     return s
 
 
 def apply_operator(level: Level, phi: F32) -> F32:
-    """M φ = diag·φ − Σ_f A_f φ_nb (zero on inactive cells)."""
-    return level.diag * phi - _neighbour_sum(level, phi)
+    """M φ = diag·φ − Σ_f A_f φ_nb (zero on inactive cells), for a compact (nx, ny, nz) field."""
+    flat = level.flat
+    flat.interior(flat.x)[...] = phi
+    out = flat.r_span
+    np.multiply(flat.diag, flat.x_span, out=out)
+    out -= _neighbour_sum(flat)
+    if flat.coefficients is None:  # the plain sum is not zero on inactive cells; A·φ_nb would have been
+        np.copyto(out, np.float32(0.0), where=flat.inactive)
+    return flat.interior(flat.r).copy()
 
 
-def _smooth(level: Level, phi: F32, b: F32, order: tuple[str, str]) -> F32:
-    """Red–black Gauss–Seidel: update all red cells from their (black) neighbours, then all black cells.
-
-    Each half sweep is φ ← keep·φ + inv_diag_colour·(b + Σ A φ_nb), an arithmetic blend (no boolean scatter).
-    """
-    for colour in order:
-        if colour == "red":
-            keep, scale = level.keep_red, level.red_inv_diag
-        else:
-            keep, scale = level.keep_black, level.black_inv_diag
-        phi = keep * phi + scale * (b + _neighbour_sum(level, phi))
-    return phi
+def _half_sweep(flat: _FlatLevel, keep: F32, scale: F32) -> None:
+    """One colour of red–black Gauss–Seidel, in place on ``flat.x``: φ ← keep·φ + inv_diag_colour·(b + Σ A φ_nb),
+    an arithmetic blend (no boolean scatter); the other colour's cells and inactive cells keep their value."""
+    s = _neighbour_sum(flat)
+    np.add(flat.b_span, s, out=s)
+    np.multiply(scale, s, out=s)
+    x = flat.x_span
+    np.multiply(keep, x, out=x)
+    np.add(x, s, out=x)
 
 
-def _restrict(r: F32) -> F32:
-    """Coarse right-hand side: 4 × the mean of the 8 children (the (2h)²/h² scaling of the 7-point Laplacian)."""
+def _restrict_into(fine: _FlatLevel, coarse: _FlatLevel) -> None:
+    """Coarse right-hand side from the fine residual ``fine.r``: 4 × the mean of the 8 children (the (2h)²/h²
+    scaling of the 7-point Laplacian), written into the coarse level's ``b``."""
+    r = fine.interior(fine.r)
     s = r[0::2] + r[1::2]
     s = s[:, 0::2] + s[:, 1::2]
-    s = s[:, :, 0::2] + s[:, :, 1::2]
-    s *= np.float32(0.5)
-    return s
+    out = coarse.interior(coarse.b)
+    np.add(s[:, :, 0::2], s[:, :, 1::2], out=out)
+    out *= np.float32(0.5)
 
 
-def _prolong(e: F32) -> F32:
-    """Piecewise-constant prolongation: each coarse value to its 8 children (adjoint of the restriction)."""
-    cx, cy, cz = e.shape
-    out = np.broadcast_to(e[:, None, :, None, :, None], (cx, 2, cy, 2, cz, 2))
-    return out.reshape(2 * cx, 2 * cy, 2 * cz)
-
-
-def v_cycle(hierarchy: PoissonHierarchy, b: F32, depth: int = 0) -> F32:
-    """One symmetric V-cycle approximating M⁻¹ b (a symmetric positive preconditioner for CG)."""
-    level = hierarchy.levels[depth]
+def _v_cycle(levels: list[Level], depth: int) -> None:
+    """One symmetric V-cycle from ``flat.b`` of level ``depth`` into its ``flat.x`` (levels below are scratch)."""
+    level = levels[depth]
+    flat = level.flat
     if level.dense_inverse is not None:
-        x = np.zeros_like(b)
-        cells = level.active
+        cells = level.dense_cells  # inactive cells of this level's x are never written: they stay 0
         # multiply-and-sum rather than BLAS matvec: numpy's pairwise sum gives the same bits on every CPU
-        x[cells] = (level.dense_inverse * b[cells].astype(np.float64)[None, :]).sum(axis=1).astype(np.float32)
-        return x
-    x = level.red_inv_diag * b  # the first red half sweep from φ = 0 needs no neighbours
-    x = _smooth(level, x, b, ("black",))
+        flat.x[cells] = (level.dense_inverse * flat.b[cells].astype(np.float64)[None, :]).sum(axis=1).astype(
+            np.float32)
+        return
+    x = flat.x_span
+    np.multiply(flat.red_inv_diag, flat.b_span, out=x)  # the first red half sweep from φ = 0 needs no neighbours
+    _half_sweep(flat, flat.keep_black, flat.black_inv_diag)
     for _ in range(_SMOOTH_SWEEPS - 1):
-        x = _smooth(level, x, b, ("red", "black"))
-    residual = np.where(level.active, b - apply_operator(level, x), np.float32(0.0))
-    x = x + _prolong(v_cycle(hierarchy, _restrict(residual), depth + 1))
-    x[~level.active] = 0.0
+        _half_sweep(flat, flat.keep_red, flat.red_inv_diag)
+        _half_sweep(flat, flat.keep_black, flat.black_inv_diag)
+    residual = flat.r_span  # b − M x on active cells, 0 elsewhere
+    np.multiply(flat.diag, x, out=residual)
+    residual -= _neighbour_sum(flat)
+    np.subtract(flat.b_span, residual, out=residual)
+    np.copyto(residual, np.float32(0.0), where=flat.inactive)
+    coarse = levels[depth + 1].flat
+    _restrict_into(flat, coarse)
+    _v_cycle(levels, depth + 1)
+    # piecewise-constant prolongation: each coarse value added to its 8 children (adjoint of the restriction)
+    flat.x_children += coarse.interior(coarse.x)[:, None, :, None, :, None]
+    np.copyto(x, np.float32(0.0), where=flat.inactive)
     for _ in range(_SMOOTH_SWEEPS):
-        x = _smooth(level, x, b, ("black", "red"))
-    return x
+        _half_sweep(flat, flat.keep_black, flat.black_inv_diag)
+        _half_sweep(flat, flat.keep_red, flat.red_inv_diag)
+
+
+def v_cycle(hierarchy: PoissonHierarchy, b: F32) -> F32:
+    """One symmetric V-cycle approximating M⁻¹ b (a symmetric positive preconditioner for CG): red–black
+    Gauss–Seidel pre- and post-smoothing, the residual restricted to the next level down, a dense solve on the
+    coarsest level, the correction prolonged back."""
+    flat = hierarchy.levels[0].flat
+    flat.interior(flat.b)[...] = b
+    _v_cycle(hierarchy.levels, 0)
+    return flat.interior(flat.x).copy()
 
 
 def _dot(a: F32, b: F32) -> float:
