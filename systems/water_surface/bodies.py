@@ -22,8 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from engine.spatial import cross, quat_mul, quat_normalize
-from systems.water_surface.geometry import BOX, F64, SPHERE, Grid, bilinear, bilinear_with_slope
+from engine.spatial import cross
+from systems.water_surface.geometry import BOX, F64, SPHERE, Grid, all_of, bilinear_slope_pair, sum_of
 
 __all__ = ["BodyArrays", "apply_impulses", "inertia", "integrate", "pool_contacts", "water_forces"]
 
@@ -69,6 +69,20 @@ _SAMPLES = max(len(_BOX_SAMPLES), len(_SPHERE_SAMPLES))
 _CORNERS = np.array([[sx, sy, sz] for sx in (-1.0, 1.0) for sy in (-1.0, 1.0) for sz in (-1.0, 1.0)])
 
 
+def _padded(samples: F64) -> tuple[F64, F64]:
+    """Body-frame samples as (3, S) (coordinate-major, padded to the larger lattice) and their shares of the
+    volume (S,) (0 on the padding)."""
+    table = np.zeros((3, _SAMPLES))
+    table[:, :len(samples)] = samples.T
+    share = np.zeros(_SAMPLES)
+    share[:len(samples)] = 1.0 / len(samples)
+    return table, share
+
+
+_BOX_TABLE, _BOX_SHARE = _padded(_BOX_SAMPLES)
+_SPHERE_TABLE, _SPHERE_SHARE = _padded(_SPHERE_SAMPLES)
+
+
 @dataclass
 class BodyArrays:
     """Dynamic state of B bodies, gathered from the world for one step and written back after it."""
@@ -108,43 +122,68 @@ def inertia(bodies: BodyArrays) -> F64:
 
 
 def _world_inverse_inertia(rot: F64, moments: F64) -> F64:
-    return np.einsum("bij,bj,bkj->bik", rot, 1.0 / moments, rot)
+    return (rot / moments[:, None, :]) @ rot.transpose(0, 2, 1)
+
+
+def _rotate(rot: F64, v: F64) -> F64:
+    """R·v for (B, 3, 3) matrices and (B, 3) vectors."""
+    return (rot @ v[:, :, None])[:, :, 0]
+
+
+def _unrotate(rot: F64, v: F64) -> F64:
+    """Rᵀ·v (world to body frame)."""
+    return (v[:, None, :] @ rot)[:, 0, :]
 
 
 def _samples(bodies: BodyArrays, rot: F64) -> tuple[F64, F64, F64]:
-    """World sample offsets (B, S, 3) from the centre of mass, sample volumes (B, S), vertical thickness (B,)."""
-    b = len(bodies)
-    local = np.zeros((b, _SAMPLES, 3))
-    volume = np.zeros((b, _SAMPLES))
+    """World sample offsets (B, 3, S) from the centre of mass (coordinate-major), sample volumes (B, S), vertical
+    thickness (B,). Only boxes: S = 4³; with spheres the boxes' lattices are padded to the spheres' 81 points
+    (samples of no volume)."""
     is_box = bodies.shapes == BOX
-    local[:, :len(_BOX_SAMPLES)] = np.where(is_box[:, None, None], _BOX_SAMPLES[None] * bodies.half[:, None, :], 0.0)
-    volume[:, :len(_BOX_SAMPLES)] = np.where(is_box, bodies.volume / len(_BOX_SAMPLES), 0.0)[:, None]
-    sph = ~is_box
-    local[sph, :len(_SPHERE_SAMPLES)] = _SPHERE_SAMPLES[None] * bodies.radius[sph, None, None]
-    volume[sph] = 0.0
-    volume[sph, :len(_SPHERE_SAMPLES)] = (bodies.volume[sph] / len(_SPHERE_SAMPLES))[:, None]
-    thickness_box = np.einsum("bj,bj->b", np.abs(rot[:, 1, :]), 2.0 * bodies.half / _BOX_N)
-    thickness = np.where(is_box, thickness_box, 2.0 * bodies.radius / _SPHERE_N)
-    return np.einsum("bij,bsj->bsi", rot, local), volume, thickness
+    if all_of(is_box, axis=None):
+        s = len(_BOX_SAMPLES)
+        local = _BOX_TABLE[None, :, :s] * bodies.half[:, :, None]
+        volume = bodies.volume[:, None] * _BOX_SHARE[:s]
+        thickness = sum_of(np.abs(rot[:, 1, :]) * bodies.half, axis=1) * (2.0 / _BOX_N)
+    else:
+        box = is_box[:, None, None]
+        size = np.where(box[:, :, 0], bodies.half, bodies.radius[:, None])
+        local = np.where(box, _BOX_TABLE, _SPHERE_TABLE) * size[:, :, None]
+        volume = bodies.volume[:, None] * np.where(box[:, :, 0], _BOX_SHARE, _SPHERE_SHARE)
+        thickness_box = sum_of(np.abs(rot[:, 1, :]) * bodies.half, axis=1) * (2.0 / _BOX_N)
+        thickness = np.where(is_box, thickness_box, 2.0 * bodies.radius / _SPHERE_N)
+    return rot @ local, volume, thickness
 
 
 def water_forces(bodies: BodyArrays, rot: F64, heights: F64, previous: F64, dt: float, grid: Grid, density: float,
                  gravity: F64) -> tuple[F64, F64, F64, F64]:
     """Buoyancy force and torque about the centre of mass (B, 3), submerged volume (B,) and the mean vertical
-    water velocity (z(t) − z(t−1)) / Δt over the submerged samples (B,), ``previous`` = z(t − 1)."""
+    water velocity (z(t) − z(t−1)) / Δt over the submerged samples (B,), ``previous`` = z(t − 1).
+
+    Every array is (B, S), one per coordinate: (B, S, 3) arrays with their short last axis cost several times
+    more per element."""
     offset, dv, s = _samples(bodies, rot)
-    p = bodies.position[:, None, :] + offset
-    uv = grid.to_uv(p[..., [0, 2]])
-    wet = grid.inside(uv)
-    eta, du, dz = bilinear_with_slope(heights, uv)
-    frac = np.clip((grid.y0 + eta - p[..., 1]) / s[:, None] + 0.5, 0.0, 1.0) * wet
+    ox, oy, oz = offset[:, 0], offset[:, 1], offset[:, 2]
+    position = bodies.position
+    py = position[:, 1:2] + oy
+    u = (position[:, 0:1] + ox - grid.x0) / grid.h
+    v = (position[:, 2:3] + oz - grid.z0) / grid.h
+    wet = (u >= 0.0) & (u <= grid.nx - 1) & (v >= 0.0) & (v <= grid.nz - 1)
+    eta, du, dz, eta_before = bilinear_slope_pair(heights, previous, u, v)
+    frac = np.minimum(np.maximum((grid.y0 + eta - py) / s[:, None] + 0.5, 0.0), 1.0) * wet
     sub = frac * dv
-    push = density * gravity[:, None] * sub
-    force = np.stack([-push * du / grid.h, push, -push * dz / grid.h], -1)
-    submerged = sub.sum(axis=1)
-    w = (eta - bilinear(previous, uv)) / dt
-    water_velocity = np.sum(sub * w, axis=1) / np.where(submerged > 0.0, submerged, 1.0)
-    return force.sum(axis=1), cross(offset, force).sum(axis=1), submerged, water_velocity
+    push = (density * gravity)[:, None] * sub
+    fx, fz = push * du / -grid.h, push * dz / -grid.h
+    submerged = sum_of(sub, axis=1)
+    w = (eta - eta_before) / dt
+    water_velocity = sum_of(sub * w, axis=1) / np.where(submerged > 0.0, submerged, 1.0)
+    force = np.empty((len(position), 3))
+    torque = np.empty((len(position), 3))
+    force[:, 0], force[:, 1], force[:, 2] = sum_of(fx, axis=1), sum_of(push, axis=1), sum_of(fz, axis=1)
+    torque[:, 0] = sum_of(oy * fz - oz * push, axis=1)
+    torque[:, 1] = sum_of(oz * fx - ox * fz, axis=1)
+    torque[:, 2] = sum_of(ox * push - oy * fx, axis=1)
+    return force, torque, submerged, water_velocity
 
 
 def apply_impulses(bodies: BodyArrays, impulse: F64, angular_impulse: F64) -> None:
@@ -175,37 +214,64 @@ def integrate(bodies: BodyArrays, dt: float, water: tuple | None, linear_drag: f
     n = substeps(bodies, density, dt) if water is not None else 1
     h = dt / n
     moments = inertia(bodies)
+    volume = bodies.volume
     submerged = np.zeros(len(bodies))
     decay_v = np.exp(-bodies.linear_damping * h)[:, None]
     decay_w = np.exp(-bodies.angular_damping * h)[:, None]
+    weight = bodies.mass * bodies.gravity
     for _ in range(n):  # sub-steps, vectorized over bodies
         rot = quat_to_matrix(bodies.rotation)
         force = bodies.force.copy()
-        force[:, 1] -= bodies.mass * bodies.gravity
-        torque = bodies.torque.copy()
-        drag = np.zeros(len(bodies))
-        water_up = np.zeros(len(bodies))
-        spin_drag = np.zeros(len(bodies))
+        force[:, 1] -= weight
+        torque = bodies.torque
         if water is not None:
             heights, previous, grid = water
             f, t, submerged, water_up = water_forces(bodies, rot, heights, previous, dt, grid, density,
                                                      bodies.gravity)
             force += f
-            torque += t
+            torque = torque + t
             drag = linear_drag * density * submerged / bodies.mass
-            spin_drag = angular_drag * submerged / bodies.volume
-        accel = force / bodies.mass[:, None]
-        accel[:, 1] += drag * water_up
-        bodies.velocity = (bodies.velocity + h * accel) / (1.0 + h * drag)[:, None] * decay_v
-        inv = _world_inverse_inertia(rot, moments)
-        world_inertia = np.einsum("bij,bj,bkj->bik", rot, moments, rot)
-        gyro = cross(bodies.spin, np.einsum("bij,bj->bi", world_inertia, bodies.spin))
-        bodies.spin = (bodies.spin + h * np.einsum("bij,bj->bi", inv, torque - gyro)) / (1.0 + h * spin_drag)[:, None]
-        bodies.spin *= decay_w
+            accel = force / bodies.mass[:, None]
+            accel[:, 1] += drag * water_up
+            bodies.velocity = (bodies.velocity + h * accel) / (1.0 + h * drag)[:, None] * decay_v
+        else:
+            bodies.velocity = (bodies.velocity + h * (force / bodies.mass[:, None])) * decay_v
+        # Euler's equations in the body frame: I·ω̇ = τ − ω × I·ω, with I = R·M·Rᵀ (M the principal moments)
+        spin_body = _unrotate(rot, bodies.spin)
+        gyro = cross(spin_body, moments * spin_body)
+        accel = _rotate(rot, (_unrotate(rot, torque) - gyro) / moments)
+        spin = bodies.spin + h * accel
+        if water is not None:
+            spin /= (1.0 + h * angular_drag * submerged / volume)[:, None]
+        spin *= decay_w
+        bodies.spin = spin
         bodies.position = bodies.position + h * bodies.velocity
-        spin_q = np.concatenate([np.zeros((len(bodies), 1)), bodies.spin], axis=1)
-        bodies.rotation = quat_normalize(bodies.rotation + 0.5 * h * quat_mul(spin_q, bodies.rotation))
+        q = bodies.rotation + (0.5 * h) * _spin_product(spin, bodies.rotation)
+        bodies.rotation = q / np.sqrt(sum_of(q * q, axis=1))[:, None]
     return submerged
+
+
+def _spin_product(spin: F64, q: F64) -> F64:
+    """(0, ω) ⊗ q (Hamilton product; q̇ = ½·(0, ω) ⊗ q) for (B, 3) ω and (B, 4) q, from one table of products."""
+    products = (spin[:, :, None] * q[:, None, :]).reshape(len(q), 12)
+    return products @ _SPIN_PRODUCTS
+
+
+def _spin_products() -> F64:
+    """(12, 4): (0, ω) ⊗ q as a linear map of the products ω_a·q_b (flattened a·4 + b), a ∈ (x, y, z),
+    b ∈ (w, x, y, z)."""
+    x, y, z = range(3)
+    qw, qx, qy, qz = range(4)
+    terms = [[(-1, x, qx), (-1, y, qy), (-1, z, qz)], [(1, x, qw), (1, y, qz), (-1, z, qy)],
+             [(-1, x, qz), (1, y, qw), (1, z, qx)], [(1, x, qy), (-1, y, qx), (1, z, qw)]]
+    table = np.zeros((12, 4))
+    for entry, products in enumerate(terms):
+        for sign, a, b in products:
+            table[4 * a + b, entry] = sign
+    return table
+
+
+_SPIN_PRODUCTS = _spin_products()
 
 
 def pool_contacts(bodies: BodyArrays, grid: Grid, floor: float, active: np.ndarray) -> None:

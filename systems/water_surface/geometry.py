@@ -130,6 +130,27 @@ def bilinear_with_slope(field: F64, uv: F64) -> tuple[F64, F64, F64]:
     return bottom + tv * (top - bottom), du, top - bottom
 
 
+def bilinear_slope_pair(field: F64, other: F64, u: F64, v: F64) -> tuple[F64, F64, F64, F64]:
+    """:func:`bilinear_with_slope` of ``field`` and the bilinear value of ``other`` (same shape) at the points
+    (``u``, ``v``) given one coordinate per array (any shape), sharing the lookups."""
+    nz, nx = field.shape
+    u = np.minimum(np.maximum(u, 0.0), nx - 1)
+    v = np.minimum(np.maximum(v, 0.0), nz - 1)
+    i = np.minimum(u.astype(np.int64), nx - 2)
+    j = np.minimum(v.astype(np.int64), nz - 2)
+    tu, tv = u - i, v - j
+    flat = j * nx + i
+    f, o = field.ravel(), other.ravel()
+    z00, z10, z01, z11 = f[flat], f[flat + 1], f[flat + nx], f[flat + (nx + 1)]
+    bottom = z00 + tu * (z10 - z00)
+    top = z01 + tu * (z11 - z01)
+    du = (1.0 - tv) * (z10 - z00) + tv * (z11 - z01)
+    o00, o10, o01, o11 = o[flat], o[flat + 1], o[flat + nx], o[flat + (nx + 1)]
+    o_bottom = o00 + tu * (o10 - o00)
+    o_top = o01 + tu * (o11 - o01)
+    return bottom + tv * (top - bottom), du, top - bottom, o_bottom + tv * (o_top - o_bottom)
+
+
 def polygon_edges(polygons: F64, counts: I64) -> tuple[F64, F64, NDArray[np.bool_]]:
     """Start and end points (B, V, 2) of every polygon edge k → k + 1 (cyclic) and which edges are real."""
     B, V = polygons.shape[:2]
