@@ -68,6 +68,7 @@ class Edges:
     c: F64  # (B, V)
     valid: np.ndarray  # (B, V)
     length2: F64  # (B, V) |e|², 1 where it is 0 (a safe divisor)
+    _table: F64 | None = None
 
     @staticmethod
     def of(polygons: F64, counts: I64) -> Edges:
@@ -87,22 +88,56 @@ class Edges:
         c = np.where(real, ns[0] + ns[1], -np.inf)
         return Edges(start, e, n, c, valid, np.where(length2 > 0.0, length2, 1.0))
 
+    @property
+    def table(self) -> F64:
+        """(9, V, B), per edge: start (2 rows), direction (2), inward normal (2), c, |e|², and 0 on a real edge,
+        ∞ on padding. c is +∞ on every edge of a polygon with fewer than 3 vertices (it contains nothing).
+
+        Edge-major with the polygons last: taking each point's polygon along the last axis gives (9, V, P) rows
+        that broadcast against the points' coordinates (P,), all in one gather (``take``: a fancy index on a
+        leading axis costs several times more)."""
+        if self._table is None:
+            c = np.where(self.valid[:, 2:3], self.c, np.inf)
+            rows = (self.start[0], self.start[1], self.e[0], self.e[1], self.n[0], self.n[1], c, self.length2,
+                    np.where(self.valid, 0.0, np.inf))
+            self._table = np.ascontiguousarray(np.stack(rows).transpose(0, 2, 1))
+        return self._table
+
     def columns(self, v: int) -> Edges:
         """The first ``v`` ≥ 3 edge slots of every polygon (views): all of the edges of polygons with at most ``v``
         vertices."""
         if v >= self.c.shape[1]:
             return self
         return Edges(self.start[..., :v], self.e[..., :v], self.n[..., :v], self.c[:, :v], self.valid[:, :v],
-                     self.length2[:, :v])
+                     self.length2[:, :v], self.table[:, :v])
 
     def inside(self, points: F64, body: I64, margin: float) -> np.ndarray:
         """Whether ``points[p]`` lies inside polygon ``body[p]`` by more than ``margin`` (negative: on or near the
         outline counts too). Polygons with fewer than 3 vertices contain nothing."""
         if len(points) == 0:
             return np.zeros(0, bool)
-        d = _per_point(self.n[0], body) * points[:, :1] + _per_point(self.n[1], body) * points[:, 1:]
-        inside = all_of((d - _per_point(self.c, body)) > margin, axis=1)
-        return inside & self.valid[body, 2]
+        u, v = np.ascontiguousarray(points.T)
+        return _inside(self.table[4:7].take(body, axis=2), u, v, margin)
+
+
+def _inside(rows: F64, u: F64, v: F64, margin: float) -> np.ndarray:
+    """Points (u, v) inside by more than ``margin``, given the rows (normal u, normal v, c) of their polygons'
+    edges, (3, V, P) from :attr:`Edges.table`."""
+    d = rows[0] * u + rows[1] * v
+    return all_of((d - rows[2]) > margin, axis=0)
+
+
+def _nearest(rows: F64, u: F64, v: F64) -> tuple[F64, F64]:
+    """The point of each polygon's outline nearest to (u, v), given its edges' rows (9, V, P) of
+    :attr:`Edges.table`: the projection onto each edge, clamped to it, and the closest of those."""
+    ax, ay, ex, ey = rows[0], rows[1], rows[2], rows[3]
+    t = np.minimum(np.maximum(((u - ax) * ex + (v - ay) * ey) / rows[7], 0.0), 1.0)
+    fx, fy = ax + t * ex, ay + t * ey
+    dx, dy = fx - u, fy - v
+    dist2 = dx * dx + dy * dy + rows[8]
+    p = len(u)
+    best = dist2.argmin(axis=0) * p + np.arange(p)
+    return fx.ravel().take(best), fy.ravel().take(best)
 
 
 _FLIP = np.array([-1.0, 1.0])[:, None, None]
@@ -367,53 +402,44 @@ def _against_outlines(uv: F64, body: I64, before: Edges, after: Edges) -> tuple[
     """For the added points N_c(t) = ``uv`` of polygons ``body``: N_c(t − 1) (the nearest point of D'(t − 1)),
     whether N_c(t − 1) lies inside D'(t) and whether N_c(t) lay inside D'(t − 1), the outline counting as inside.
 
-    The (point, edge) arrays are as wide as the polygons are padded: the points of polygons with at most six
+    The (edge, point) arrays are as wide as the polygons are padded: the points of polygons with at most six
     edges (boxes) are handled apart from those of wider ones (spheres), so they are not padded to a sphere's
     width (smaller work, and arrays that stay small enough for the allocator to reuse their memory)."""
     groups = [(None, before, after)]
     if before.c.shape[1] > _MAX_BOX_VERTICES:
         used = np.maximum(sum_of(before.valid, axis=1), sum_of(after.valid, axis=1))
-        narrow = (used <= _MAX_BOX_VERTICES)[body]
+        narrow = (used <= _MAX_BOX_VERTICES).take(body)
         if all_of(narrow, axis=None):
             groups = [(None, before.columns(_MAX_BOX_VERTICES), after.columns(_MAX_BOX_VERTICES))]
         elif any_of(narrow, axis=None):
             groups = [(narrow.nonzero()[0], before.columns(_MAX_BOX_VERTICES), after.columns(_MAX_BOX_VERTICES)),
                       ((~narrow).nonzero()[0], before, after)]
-    if groups[0][0] is None:
-        back = nearest_on_outline(uv, body, before)
-        return back, after.inside(back, body, -_ON_OUTLINE), before.inside(uv, body, -_ON_OUTLINE)
-    back, raised, lowered = np.empty_like(uv), np.empty(len(uv), bool), np.empty(len(uv), bool)
+    coordinates = np.ascontiguousarray(uv.T)
+    back, raised, lowered = np.empty((2, len(uv))), np.empty(len(uv), bool), np.empty(len(uv), bool)
     for index, old, new in groups:
-        p, b = uv[index], body[index]
-        back[index] = q = nearest_on_outline(p, b, old)
-        raised[index] = new.inside(q, b, -_ON_OUTLINE)
-        lowered[index] = old.inside(p, b, -_ON_OUTLINE)
-    return back, raised, lowered
+        u, v = coordinates if index is None else coordinates.take(index, axis=1)
+        b = body if index is None else body.take(index)
+        rows = old.table.take(b, axis=2)
+        bu, bv = _nearest(rows, u, v)
+        inside_new = _inside(new.table[4:7].take(b, axis=2), bu, bv, -_ON_OUTLINE)
+        inside_old = _inside(rows[4:7], u, v, -_ON_OUTLINE)
+        if index is None:
+            return np.stack([bu, bv], axis=-1), inside_new, inside_old
+        back[0, index], back[1, index], raised[index], lowered[index] = bu, bv, inside_new, inside_old
+    return back.T, raised, lowered
 
 
 def _per_point(values: np.ndarray, body: I64, axis: int = 0) -> np.ndarray:
     """``values`` taken at ``body`` along ``axis``, or ``values`` itself when there is one body (it broadcasts)."""
     if values.shape[axis] == 1:
         return values
-    return values[body] if axis == 0 else values[:, body]
+    return values.take(body, axis=axis)
 
 
 def nearest_on_outline(points: F64, body: I64, edges: Edges) -> F64:
-    """The point of polygon ``body[p]``'s outline nearest to ``points[p]``.
-
-    Coordinates are handled one at a time: the (P, V) arrays stay small (under the allocator's threshold for
-    fresh memory maps, which a (2, P, V) array of a few hundred points would cross)."""
-    ax, ay = _per_point(edges.start[0], body), _per_point(edges.start[1], body)
-    ex, ey = _per_point(edges.e[0], body), _per_point(edges.e[1], body)
-    px, py = points[:, :1], points[:, 1:]
-    t = np.minimum(np.maximum(((px - ax) * ex + (py - ay) * ey) / _per_point(edges.length2, body), 0.0), 1.0)
-    fx, fy = ax + t * ex, ay + t * ey
-    dx, dy = fx - px, fy - py
-    dist2 = np.where(_per_point(edges.valid, body), dx * dx + dy * dy, np.inf)
-    rows, best = np.arange(len(points)), dist2.argmin(axis=1)
-    out = np.empty((len(points), 2))
-    out[:, 0], out[:, 1] = fx[rows, best], fy[rows, best]
-    return out
+    """The point of polygon ``body[p]``'s outline nearest to ``points[p]``."""
+    u, v = np.ascontiguousarray(points.T)
+    return np.stack(_nearest(edges.table.take(body, axis=2), u, v), axis=-1)
 
 
 # ------------------------------------------------------------------------------------------- coupling
