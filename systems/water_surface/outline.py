@@ -501,7 +501,8 @@ def coupling_pairs(points: AddedPoints, fluid: np.ndarray, grid: Grid, solid_mas
     fu, fv = np.floor(u), np.floor(v)
     iu, iv = fu.astype(np.int64), fv.astype(np.int64)
     cu, cv = fu + _CORNER_U, fv + _CORNER_V  # (4, M) corners of each point's square
-    dist = np.hypot(cu - u, cv - v)
+    du, dv = cu - u, cv - v
+    dist = np.sqrt(du * du + dv * dv)  # (np.hypot is several times slower)
     ok = (dist < 1.0) & (cu < grid.nx) & (cv < grid.nz)  # points lie on the footprint
     flat = np.where(ok, (iv * grid.nx + iu) + np.array([0, 1, grid.nx, grid.nx + 1])[:, None], 0)
     if solid_mask:
@@ -512,7 +513,8 @@ def coupling_pairs(points: AddedPoints, fluid: np.ndarray, grid: Grid, solid_mas
     g = flat[c_idx, p_idx]
     w = 1.0 - dist[c_idx, p_idx]
     if m <= _DENSE_PAIRS:
-        dd = np.hypot(u[:, None] - u[None, :], v[:, None] - v[None, :])
+        du, dv = u[:, None] - u[None, :], v[:, None] - v[None, :]
+        dd = np.sqrt(du * du + dv * dv)
         close = dd < 1.0
         np.fill_diagonal(close, False)
         a, b = close.nonzero()
@@ -530,7 +532,9 @@ def coupling_pairs(points: AddedPoints, fluid: np.ndarray, grid: Grid, solid_mas
         start[0] = True
         np.not_equal(sorted_cell[1:], sorted_cell[:-1], out=start[1:])
         start = start.nonzero()[0]
-        length = np.diff(start, append=m)
+        length = np.empty(len(start), np.int64)
+        np.subtract(start[1:], start[:-1], out=length[:-1])
+        length[-1] = m - start[-1]
         slots[sorted_cell[start]] = np.arange(len(start))
         found = np.minimum(np.maximum(slots[wanted], 0), len(start) - 1)  # unwritten slots hold anything
         hit = sorted_cell[start[found]] == wanted  # true only where the square holds points (so its slot is fresh)
@@ -539,7 +543,8 @@ def coupling_pairs(points: AddedPoints, fluid: np.ndarray, grid: Grid, solid_mas
     run, pos = ranges(lo, count)
     first, around = np.divmod(run, len(_HALF_CELLS))
     second = order[pos]
-    dd = np.hypot(u[first] - u[second], v[first] - v[second])
+    du, dv = u.take(first) - u.take(second), v.take(first) - v.take(second)
+    dd = np.sqrt(du * du + dv * dv)
     # each unordered pair once: across squares from the half neighbourhood, inside a square when first < second
     close = (dd < 1.0) & ((around > 0) | (first < second))
     a, b, weight = first[close], second[close], 1.0 - dd[close]

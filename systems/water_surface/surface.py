@@ -151,14 +151,16 @@ def _carried(state: WaterState, points: AddedPoints, z: F64, zp: F64) -> tuple[F
     known = state.point_keys
     if len(known) == len(points) and len(state.point_heights) == len(known) and np.array_equal(known, points.keys):
         return state.point_heights, state.point_previous  # the same points as last step (read only)
-    heights, previous = bilinear_fields((z, zp), points.uv)
-    if len(known) and len(points):
-        sorter = np.argsort(known)
-        pos = np.minimum(np.searchsorted(known, points.keys, sorter=sorter), len(known) - 1)
-        src = sorter[pos]
-        same = known[src] == points.keys
-        heights = np.where(same, state.point_heights[src], heights)
-        previous = np.where(same, state.point_previous[src], previous)
+    if not (len(known) and len(points)):
+        heights, previous = bilinear_fields((z, zp), points.uv)
+        return heights, previous
+    sorter = np.argsort(known)
+    src = sorter.take(np.minimum(np.searchsorted(known, points.keys, sorter=sorter), len(known) - 1))
+    same = known.take(src) == points.keys
+    heights, previous = state.point_heights.take(src), state.point_previous.take(src)
+    if not all_of(same, axis=None):  # only the new points are lifted onto the surface
+        new = (~same).nonzero()[0]
+        heights[new], previous[new] = bilinear_fields((z, zp), points.uv.take(new, axis=0))
     return heights, previous
 
 

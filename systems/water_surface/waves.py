@@ -105,7 +105,7 @@ def propagate(z: F64, zp: F64, k: float, coefficient: F64, degree: F64, solid: I
         if solid_mask is None:
             solid_mask = np.zeros(z.shape, bool)
             solid_mask.ravel()[solid] = True
-        nb = neighbour_table(nz, nx)[solid].ravel()
+        nb = neighbour_table(nz, nx).take(solid, axis=0).ravel()
         water = (nb >= 0) & ~solid_mask.ravel()[nb]
         index.append(nb[water])
         ds.append(-zf[solid].repeat(4)[water])
@@ -124,8 +124,8 @@ def propagate(z: F64, zp: F64, k: float, coefficient: F64, degree: F64, solid: I
         u = len(vertices)
         s_extra = np.bincount(group, np.concatenate(ds) if many else ds[0], u)
         d_extra = np.bincount(group, np.concatenate(dd) if many else dd[0], u)
-        around = neighbour_table(nz, nx)[vertices]
-        s_t = sum_of(np.where(around >= 0, zf[around], 0.0), axis=1) + s_extra
+        around = neighbour_table(nz, nx).take(vertices, axis=0)
+        s_t = sum_of(np.where(around >= 0, zf.take(around), 0.0), axis=1) + s_extra
         d_t = degree.ravel()[vertices] + d_extra
         lonely = d_t <= 1e-12
         k_t = np.minimum(k, 2.0 / np.where(lonely, 1.0, d_t))  # k·D ≤ 2: stable with the extra neighbours
