@@ -282,23 +282,29 @@ class MeshFeature(RenderFeature):
             out[shape] = data
         return out
 
-    def _vao(self, shape: str, count: int) -> moderngl.VertexArray:
+    def _vao(self, shape: str, count: int, defines: tuple[str, ...]) -> moderngl.VertexArray:
+        """The shape's VAO for the program variant ``defines`` over its instance buffer (grown as needed)."""
         buf = self._instances.get(shape)
         needed = count * self.INSTANCE_FLOATS * 4
         if buf is None or buf.size < needed:
             if buf is not None:
                 buf.release()
-                self._geometry.pop(shape)[0].release()
+                vaos, vbo, ibo = self._geometry.pop(shape)
+                for obj in (*vaos.values(), vbo, ibo):
+                    obj.release()
             buf = self.ctx.buffer(reserve=max(needed, 64 * self.INSTANCE_FLOATS * 4))
             self._instances[shape] = buf
         if shape not in self._geometry:
             verts, idx = primitive(shape)
             vbo, ibo = self.ctx.buffer(verts.tobytes()), self.ctx.buffer(idx.tobytes())
-            prog = self.renderer.load_program(SHADERS, "mesh")
-            vao = self.ctx.vertex_array(prog, [(vbo, "3f 3f", "in_position", "in_normal"),
-                                               (buf, "4f 4f 4f 4f 4f/i", "m0", "m1", "m2", "m3", "in_color")], ibo)
-            self._geometry[shape] = (vao, vbo, ibo)
-        return self._geometry[shape][0]
+            self._geometry[shape] = ({}, vbo, ibo)
+        vaos, vbo, ibo = self._geometry[shape]
+        if defines not in vaos:
+            prog = self.renderer.load_program(SHADERS, "mesh", defines)
+            vaos[defines] = self.ctx.vertex_array(prog, [(vbo, "3f 3f", "in_position", "in_normal"),
+                                                         (buf, "4f 4f 4f 4f 4f/i", "m0", "m1", "m2", "m3",
+                                                          "in_color")], ibo)
+        return vaos[defines]
 
     def add_passes(self, graph, view: View, data) -> None:
         if not data:
@@ -309,10 +315,11 @@ class MeshFeature(RenderFeature):
             fbo.use()
             self.ctx.enable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
             self.ctx.disable(moderngl.BLEND)
-            prog = self.renderer.load_program(SHADERS, "mesh")
-            set_uniforms(prog, **lighting_uniforms(self.renderer, view))
+            lighting = lighting_uniforms(self.renderer, view)
+            defines = ("FOG",) if lighting["fog_density"] > 0.0 else ()
+            set_uniforms(self.renderer.load_program(SHADERS, "mesh", defines), **lighting)
             for shape, inst in data.items():
-                vao = self._vao(shape, len(inst))
+                vao = self._vao(shape, len(inst), defines)
                 self._instances[shape].write(inst.tobytes())
                 vao.render(moderngl.TRIANGLES, instances=len(inst))
             self.ctx.disable(moderngl.CULL_FACE)
@@ -320,8 +327,9 @@ class MeshFeature(RenderFeature):
         graph.add_pass(f"meshes.{view.name}", opaque_setup(view), execute)
 
     def release(self) -> None:
-        for vao, vbo, ibo in self._geometry.values():
-            vao.release(), vbo.release(), ibo.release()
+        for vaos, vbo, ibo in self._geometry.values():
+            for obj in (*vaos.values(), vbo, ibo):
+                obj.release()
         for buf in self._instances.values():
             buf.release()
         self._geometry.clear()

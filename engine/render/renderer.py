@@ -109,7 +109,7 @@ class Renderer:
         self.sun_color = np.array(self.settings.sun_color, np.float32)
         self.ambient = float(self.settings.ambient)
         self._programs: dict[tuple, moderngl.Program] = {}
-        self._loaded: dict[tuple[str, str], moderngl.Program] = {}
+        self._loaded: dict[tuple, moderngl.Program] = {}  # (directory, name, defines)
         self._framebuffers: dict[tuple, moderngl.Framebuffer] = {}
         self.quad_buffer = ctx.buffer(np.array([-1, -1, 1, -1, -1, 1, 1, 1], np.float32).tobytes())
         self.graph = RenderGraph(ResourcePool(self._make_resource, self._free_resource))
@@ -140,20 +140,33 @@ class Renderer:
             self._programs[key] = prog
         return prog
 
-    def load_program(self, directory: str | Path, name: str) -> moderngl.Program:
+    def load_program(self, directory: str | Path, name: str, defines: tuple[str, ...] = ()) -> moderngl.Program:
         """``name.vert`` + ``name.frag`` (+ ``name.geom``) from ``directory``, read and compiled once (passes call
-        this every frame: no file reads after the first); :meth:`reload_shaders` picks up edited files."""
-        key = (str(directory), name)
+        this every frame: no file reads after the first); :meth:`reload_shaders` picks up edited files.
+
+        ``defines``: a shader variant, each name ``#define``d in every stage after its ``#version`` line (a
+        software rasteriser runs both sides of a branch, so features compile variants instead of testing
+        uniforms)."""
+        key = (str(directory), name, tuple(defines))
         prog = self._loaded.get(key)
         if prog is not None:
             return prog
         directory = Path(directory)
         geom = directory / f"{name}.geom"
+
+        def source(path: Path) -> str:
+            text = shader_source(path)
+            if not defines:
+                return text
+            version, rest = text.split("\n", 1)
+            return "\n".join([version, *(f"#define {d}" for d in defines), rest])
+
         try:
-            prog = self.program(shader_source(directory / f"{name}.vert"), shader_source(directory / f"{name}.frag"),
-                                shader_source(geom) if geom.exists() else None)
+            prog = self.program(source(directory / f"{name}.vert"), source(directory / f"{name}.frag"),
+                                source(geom) if geom.exists() else None)
         except moderngl.Error as exc:
-            raise RuntimeError(f"shader '{name}' in {directory} failed to compile:\n{exc}") from None
+            variant = f" ({', '.join(defines)})" if defines else ""
+            raise RuntimeError(f"shader '{name}'{variant} in {directory} failed to compile:\n{exc}") from None
         self._loaded[key] = prog
         return prog
 
@@ -163,12 +176,12 @@ class Renderer:
         Returns the compile errors (empty when all compiled).  F5 in the window calls this with the config reload.
         """
         errors = []
-        for directory, name in list(self._loaded):
-            old = self._loaded.pop((directory, name))
+        for key in list(self._loaded):
+            old = self._loaded.pop(key)
             try:
-                self.load_program(directory, name)
+                self.load_program(*key)
             except (RuntimeError, OSError) as exc:
-                self._loaded[(directory, name)] = old
+                self._loaded[key] = old
                 errors.append(str(exc))
         return errors
 

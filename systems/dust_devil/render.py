@@ -404,7 +404,7 @@ class DustDevilMarkers(RenderFeature):
             verts, idx = primitive("sphere", MARKER_SEGMENTS)
             inst = self.ctx.buffer(reserve=needed)
             vbo, ibo = self.ctx.buffer(verts.tobytes()), self.ctx.buffer(idx.tobytes())
-            prog = self.renderer.load_program(ENGINE_SHADERS, "mesh")
+            prog = self.renderer.load_program(ENGINE_SHADERS, "mesh", ("FOG",))  # small: fog always compiled in
             vao = self.ctx.vertex_array(prog, [(vbo, "3f 3f", "in_position", "in_normal"),
                                                (inst, "4f 4f 4f 4f 4f/i", "m0", "m1", "m2", "m3", "in_color")], ibo)
             self._gl = (vao, inst, vbo, ibo)

@@ -6,12 +6,22 @@ uniform vec3 sky_top;
 uniform vec3 sky_horizon;
 uniform vec3 camera_pos;
 uniform float fog_density;
+// max(n·h, 0)^shininess.  pow is exp2(log2(x)·y) per pixel on a software rasteriser; the exponents the engine
+// uses are constants at their call sites, so after inlining only their chain of squarings remains.
+float lobe(float x, float shininess) {
+    float x2 = x * x, x4 = x2 * x2, x8 = x4 * x4, x16 = x8 * x8;
+    if (shininess == 16.0) return x16;
+    if (shininess == 32.0) return x16 * x16;
+    if (shininess == 48.0) return x16 * x16 * x16;
+    if (shininess == 64.0) return (x16 * x16) * (x16 * x16);
+    return pow(x, shininess);
+}
 vec3 shade(vec3 albedo, vec3 n, vec3 pos, float shininess, float spec_strength) {
     float ndl = max(dot(n, sun_dir), 0.0);
     vec3 hemi = mix(sky_horizon * 0.35, sky_top, n.y * 0.5 + 0.5) * ambient;
     vec3 v = normalize(camera_pos - pos);
     vec3 h = normalize(v + sun_dir);
-    float spec = pow(max(dot(n, h), 0.0), shininess) * spec_strength;
+    float spec = lobe(max(dot(n, h), 0.0), shininess) * spec_strength;
     return albedo * (sun_color * ndl + hemi) + sun_color * spec * ndl;
 }
 vec3 fog(vec3 color, vec3 pos) {

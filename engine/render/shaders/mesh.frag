@@ -1,4 +1,5 @@
 #version 330
+// Variant FOG (passes.py MeshFeature): distance fog, compiled in only when the view has fog.
 #include "lit.glsl"
 in vec3 v_pos;
 in vec3 v_normal;
@@ -8,5 +9,8 @@ void main() {
     vec3 n = normalize(v_normal);
     if (!gl_FrontFacing) n = -n;
     vec3 c = shade(v_color.rgb, n, v_pos, 48.0, 0.25) + v_color.rgb * v_color.a;
-    frag = vec4(fog(c, v_pos), 1.0);
+#ifdef FOG
+    c = fog(c, v_pos);
+#endif
+    frag = vec4(c, 1.0);
 }

@@ -3,6 +3,7 @@
 import subprocess
 import sys
 
+import moderngl
 import numpy as np
 
 from engine.app import App
@@ -170,5 +171,36 @@ def test_reload_shaders_picks_up_edits_and_keeps_the_last_good_program(tmp_path)
     errors = renderer.reload_shaders()
     assert len(errors) == 1 and "flat" in errors[0]
     assert renderer.load_program(tmp_path, "flat") is edited
+    renderer.release()
+    app.renderer = None
+
+
+def test_program_variants_define_names_in_every_stage_and_are_cached_apart(tmp_path):
+    (tmp_path / "flat.vert").write_text(
+        "#version 330\nvoid main() { vec2 p = vec2((gl_VertexID << 1) & 2, gl_VertexID & 2);\n"
+        "#ifdef RED\n    p *= 1.0;\n#else\n    p *= 0.0;\n#endif\n    gl_Position = vec4(p * 2.0 - 1.0, 0.0, 1.0); }\n")
+    (tmp_path / "flat.frag").write_text("#version 330\nout vec4 frag;\nvoid main() {\n#ifdef RED\n"
+                                        "    frag = vec4(1.0, 0.0, 0.0, 1.0);\n#else\n    frag = vec4(0.0, 0.0, 1.0, 1.0);\n"
+                                        "#endif\n}\n")
+    app = App(SCENE)
+    renderer = make_renderer(app, 32, 32)
+    plain, red = renderer.load_program(tmp_path, "flat"), renderer.load_program(tmp_path, "flat", ("RED",))
+    assert plain is not red and renderer.load_program(tmp_path, "flat", ("RED",)) is red
+    ctx = renderer.ctx
+    target = ctx.texture((8, 8), 4)
+    fbo = ctx.framebuffer(target)
+    pixels = {}
+    for name, prog in (("plain", plain), ("red", red)):
+        fbo.use()
+        fbo.clear(0.0, 0.0, 0.0, 0.0)
+        ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
+        vao = ctx.vertex_array(prog, [])
+        vao.render(moderngl.TRIANGLES, vertices=3)
+        pixels[name] = np.frombuffer(fbo.read(components=4), np.uint8).reshape(8, 8, 4)[4, 4].tolist()
+        vao.release()
+    assert pixels == {"plain": [0, 0, 0, 0], "red": [255, 0, 0, 255]}  # the define reached both stages
+    (tmp_path / "flat.frag").write_text("#version 330\nout vec4 frag;\nvoid main() { frag = vec4(0.5); }\n")
+    assert renderer.reload_shaders() == [] and renderer.load_program(tmp_path, "flat", ("RED",)) is not red
+    fbo.release(), target.release()
     renderer.release()
     app.renderer = None
