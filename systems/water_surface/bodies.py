@@ -18,12 +18,13 @@ the body's contacts, then the body is pushed out.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from engine.spatial import cross
-from systems.water_surface.geometry import BOX, F64, SPHERE, Grid, all_of, bilinear_slope_pair, sum_of
+from systems.water_surface.geometry import BOX, F64, SPHERE, Grid, all_of, bilinear_slope_pair, max_of, sum_of
 
 __all__ = ["BodyArrays", "apply_impulses", "inertia", "integrate", "pool_contacts", "water_forces"]
 
@@ -108,17 +109,16 @@ class BodyArrays:
 
     @property
     def volume(self) -> F64:
-        box = 8.0 * np.prod(self.half, axis=1)
+        box = 8.0 * np.multiply.reduce(self.half, axis=1)
         return np.where(self.shapes == SPHERE, 4.0 / 3.0 * np.pi * self.radius ** 3, box)
 
 
 def inertia(bodies: BodyArrays) -> F64:
     """Principal moments (B, 3) in the body frame: box m/12·(b² + c², …) with full sizes, sphere 2/5·m·r²."""
     full2 = (2.0 * bodies.half) ** 2
-    box = bodies.mass[:, None] / 12.0 * np.stack([full2[:, 1] + full2[:, 2], full2[:, 0] + full2[:, 2],
-                                                    full2[:, 0] + full2[:, 1]], -1)
-    sphere = (0.4 * bodies.mass * bodies.radius ** 2)[:, None] * np.ones(3)
-    return np.where((bodies.shapes == SPHERE)[:, None], sphere, box)
+    box = bodies.mass[:, None] / 12.0 * (full2[:, [1, 0, 0]] + full2[:, [2, 2, 1]])
+    sphere = 0.4 * bodies.mass * bodies.radius ** 2
+    return np.where((bodies.shapes == SPHERE)[:, None], sphere[:, None], box)
 
 
 def _world_inverse_inertia(rot: F64, moments: F64) -> F64:
@@ -200,11 +200,11 @@ def substeps(bodies: BodyArrays, density: float, dt: float) -> int:
     """Sub-steps so that the stiffest body's buoyancy oscillation ω = √(ρ·g·A/m) keeps ω·Δt ≤ 0.3."""
     if len(bodies) == 0:
         return 1
-    faces = 4.0 * np.stack([bodies.half[:, 0] * bodies.half[:, 1], bodies.half[:, 1] * bodies.half[:, 2],
-                            bodies.half[:, 0] * bodies.half[:, 2]], -1).max(axis=1)
+    half = bodies.half
+    faces = 4.0 * np.maximum(np.maximum(half[:, 0] * half[:, 1], half[:, 1] * half[:, 2]), half[:, 0] * half[:, 2])
     area = np.where(bodies.shapes == SPHERE, np.pi * bodies.radius ** 2, faces)
     omega = np.sqrt(density * np.maximum(bodies.gravity, 1e-9) * area / bodies.mass)
-    return int(np.clip(np.ceil(float(omega.max()) * dt / _OMEGA_DT), 1, _MAX_SUBSTEPS))
+    return min(max(math.ceil(float(max_of(omega)) * dt / _OMEGA_DT), 1), _MAX_SUBSTEPS)
 
 
 def integrate(bodies: BodyArrays, dt: float, water: tuple | None, linear_drag: float = 0.0,
