@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from systems.toon_smoke import poisson
-from systems.toon_smoke.grid import F32, Geometry, sample, trilinear_weights
+from systems.toon_smoke.grid import F32, Geometry, trilinear_points
 
 __all__ = [
     "advect_scalars",
@@ -37,16 +37,19 @@ def cell_velocity(u: F32, v: F32, w: F32) -> tuple[F32, F32, F32]:
     return 0.5 * (u[:-1] + u[1:]), 0.5 * (v[:, :-1] + v[:, 1:]), 0.5 * (w[:, :, :-1] + w[:, :, 1:])
 
 
-def _to_faces(c: F32, axis: int) -> F32:
+def _to_faces(c: F32, axis: int, out: F32 | None = None) -> F32:
     """Cell values onto the faces normal to ``axis`` (mean of the two cells; the border faces copy their cell)."""
-    shape = list(c.shape)
-    shape[axis] += 1
-    out = np.empty(shape, c.dtype)
+    if out is None:
+        shape = list(c.shape)
+        shape[axis] += 1
+        out = np.empty(shape, c.dtype)
     inner = [slice(None)] * 3
     inner[axis] = slice(1, -1)
     lo, hi = [slice(None)] * 3, [slice(None)] * 3
     lo[axis], hi[axis] = slice(0, -1), slice(1, None)
-    out[tuple(inner)] = 0.5 * (c[tuple(lo)] + c[tuple(hi)])
+    inside = out[tuple(inner)]
+    np.add(c[tuple(lo)], c[tuple(hi)], out=inside)
+    inside *= np.float32(0.5)
     first, last = [slice(None)] * 3, [slice(None)] * 3
     first[axis], last[axis] = 0, -1
     out[tuple(first)] = c[tuple(first)]
@@ -65,28 +68,36 @@ def advect_velocity(geo: Geometry, u: F32, v: F32, w: F32, dt: float) -> tuple[F
 
     Each component is traced from its own faces; the two other components at a face are the 4-face averages.
     """
-    uc, vc, wc = cell_velocity(u, v, w)
+    cells = cell_velocity(u, v, w)
     s = np.float32(dt / geo.h)  # metres per second → cells per step
-    velocity_at = {
-        "u": (u, _to_faces(vc, 0), _to_faces(wc, 0)),
-        "v": (_to_faces(uc, 1), v, _to_faces(wc, 1)),
-        "w": (_to_faces(uc, 2), _to_faces(vc, 2), w),
-    }
     out = []
-    for name, values, offset in (("u", u, (0.0, 0.5, 0.5)), ("v", v, (0.5, 0.0, 0.5)), ("w", w, (0.5, 0.5, 0.0))):
-        bx, by, bz = geo.backtrace_bases[name]
-        vx, vy, vz = velocity_at[name]
-        px, py, pz = _clamped_back_trace(geo, bx, by, bz, vx, vy, vz, s)
-        out.append(sample(values, px - offset[0], py - offset[1], pz - offset[2]))
+    for axis, (name, values) in enumerate((("u", u), ("v", v), ("w", w))):
+        velocity = np.empty((3,) + values.shape, np.float32)  # the velocity at this component's faces
+        for other in range(3):
+            if other == axis:
+                velocity[other] = values
+            else:
+                _to_faces(cells[other], axis, out=velocity[other])
+        points = _clamped_back_trace(geo.backtrace_bases[name], velocity, s)
+        points -= _STAGGER[name]
+        out.append(trilinear_points(values.shape, points).gather(values))
     return out[0], out[1], out[2]
 
 
-def _clamped_back_trace(geo: Geometry, bx: F32, by: F32, bz: F32, vx: F32, vy: F32, vz: F32, s: np.float32):
-    nx, ny, nz = geo.shape
-    px = np.clip(bx - s * vx, 0.0, nx)
-    py = np.clip(by - s * vy, 0.0, ny)
-    pz = np.clip(bz - s * vz, 0.0, nz)
-    return px, py, pz
+_STAGGER = {name: np.array(offset, np.float32).reshape(3, 1, 1, 1) for name, offset in
+            (("u", (0.0, 0.5, 0.5)), ("v", (0.5, 0.0, 0.5)), ("w", (0.5, 0.5, 0.0)), ("c", (0.5, 0.5, 0.5)))}
+
+
+def _clamped_back_trace(base: F32, velocity: F32, s: np.float32) -> F32:
+    """x − s·u at every sample (3, …) of one grid (in place on ``velocity``).
+
+    The box clamp [0, n] of Stam's back-trace is left to the interpolation, which clamps the sample point to the
+    grid's first and last samples: clamp(clamp(x, 0, n) − ½, 0, n − 1) = clamp(x − ½, 0, n − 1) bit for bit (inside
+    [0, n] the inner clamp does nothing; below 0 and above n both sides end at 0 and n − 1), and
+    clamp(clamp(x, 0, n), 0, n) = clamp(x, 0, n) along a component's own axis.
+    """
+    velocity *= s
+    return np.subtract(base, velocity, out=velocity)
 
 
 def advect_scalars(geo: Geometry, fields: list[F32], u: F32, v: F32, w: F32, dt: float) -> list[F32]:
@@ -95,11 +106,9 @@ def advect_scalars(geo: Geometry, fields: list[F32], u: F32, v: F32, w: F32, dt:
     Trilinear interpolation is a convex combination, so the result stays within the old field's range (density
     stays non-negative and bounded).
     """
-    uc, vc, wc = cell_velocity(u, v, w)
-    bx, by, bz = geo.backtrace_bases["c"]
-    px, py, pz = _clamped_back_trace(geo, bx, by, bz, uc, vc, wc, np.float32(dt / geo.h))
-    weights = trilinear_weights(geo.shape, px - 0.5, py - 0.5, pz - 0.5)
-    return [weights.gather(f) for f in fields]
+    points = _clamped_back_trace(geo.backtrace_bases["c"], np.stack(cell_velocity(u, v, w)), np.float32(dt / geo.h))
+    points -= _STAGGER["c"]
+    return trilinear_points(geo.shape, points).gather_many(fields)
 
 
 @dataclass
@@ -161,10 +170,21 @@ def vorticity_force(u: F32, v: F32, w: F32, h: float, epsilon: float) -> tuple[F
     Returns the force per unit mass (m/s²) at cell centres.
     """
     uc, vc, wc = cell_velocity(u, v, w)
+    inv_h = np.float32(1.0 / h)
 
     def d(f: F32, axis: int) -> F32:
-        """Central difference ∂f/∂axis (one-sided at the walls)."""
-        return np.gradient(f, axis=axis) * np.float32(1.0 / h)
+        """Central difference ∂f/∂axis (one-sided at the walls): ``np.gradient(f, axis=axis) / h``, written out
+        (np.gradient's checks cost more than its arithmetic on these grids); halving is exact, so same bits."""
+        out = np.empty_like(f)
+        lo, mid, hi = [slice(None)] * 3, [slice(None)] * 3, [slice(None)] * 3
+        lo[axis], mid[axis], hi[axis] = slice(None, -2), slice(1, -1), slice(2, None)
+        np.subtract(f[tuple(hi)], f[tuple(lo)], out=out[tuple(mid)])
+        out[tuple(mid)] *= np.float32(0.5)
+        for edge, inner in ((0, 1), (-1, -2)):  # the two walls: one-sided differences
+            lo[axis], hi[axis] = (edge, inner) if edge == 0 else (inner, edge)
+            np.subtract(f[tuple(hi)], f[tuple(lo)], out=out[tuple(lo if edge == 0 else hi)])
+        out *= inv_h
+        return out
 
     wx = d(wc, 1) - d(vc, 2)
     wy = d(uc, 2) - d(wc, 0)

@@ -19,48 +19,75 @@ F32 = NDArray[np.float32]
 
 @dataclass
 class Trilinear:
-    """Indices and weights of trilinear interpolation at many points of one grid shape (reused per field)."""
+    """Corners and weights of trilinear interpolation at many points of one grid shape (reused per field)."""
 
-    base: NDArray[np.intp]
-    fx: F32
+    corners: NDArray[np.intp]  # (8, N) flat indices of the corners (x, y, z bits: 000, 001, 010, … 111)
+    fx: F32  # (N,) fractions along x, y, z
     fy: F32
     fz: F32
-    stride_x: int
-    stride_y: int
+    shape: tuple[int, ...]  # the shape of the points (of each result)
 
     def gather(self, values: F32) -> F32:
         """Interpolate ``values`` (the grid shape given to :func:`trilinear_weights`) at the points."""
-        flat = values.ravel()
-        b, sx, sy = self.base, self.stride_x, self.stride_y
-        c00 = flat[b]
-        c00 = c00 + (flat[b + 1] - c00) * self.fz
-        c01 = flat[b + sy]
-        c01 = c01 + (flat[b + sy + 1] - c01) * self.fz
-        c10 = flat[b + sx]
-        c10 = c10 + (flat[b + sx + 1] - c10) * self.fz
-        c11 = flat[b + sx + sy]
-        c11 = c11 + (flat[b + sx + sy + 1] - c11) * self.fz
-        c0 = c00 + (c01 - c00) * self.fy
-        c1 = c10 + (c11 - c10) * self.fy
-        return c0 + (c1 - c0) * self.fx
+        return self._blend(values.ravel().take(self.corners)).reshape(self.shape)
+
+    def gather_many(self, fields: list[F32]) -> list[F32]:
+        """:meth:`gather` for several fields of the same grid at once (one gather, one set of blends)."""
+        size = fields[0].size
+        stacked = np.concatenate([f.ravel() for f in fields])
+        index = self.corners + (np.arange(len(fields)) * size)[:, None, None]
+        out = self._blend(stacked.take(index))
+        return [row.reshape(self.shape) for row in out]
+
+    def _blend(self, c: F32) -> F32:
+        """Lerp the corner values (…, 8, N) along z, then y, then x: the same operations, in the same order, as
+        c00 = v000 + (v001 − v000)·fz, …, c0 = c00 + (c01 − c00)·fy, …, c0 + (c1 − c0)·fx."""
+        lo, hi = c[..., 0::2, :], c[..., 1::2, :]
+        c = lo + (hi - lo) * self.fz
+        lo, hi = c[..., 0::2, :], c[..., 1::2, :]
+        c = lo + (hi - lo) * self.fy
+        lo, hi = c[..., 0, :], c[..., 1, :]
+        return lo + (hi - lo) * self.fx
+
+
+_BOUNDS: dict[tuple[int, int, int], tuple] = {}
+
+
+def _bounds(shape: tuple[int, int, int]) -> tuple:
+    """Per grid shape: (3, 1) upper coordinate bounds (float32, float64), (3, 1) largest base index, corner offsets."""
+    if shape not in _BOUNDS:
+        nx, ny, nz = shape
+        upper = np.array([[nx - 1.0], [ny - 1.0], [nz - 1.0]])
+        sx, sy = ny * nz, nz
+        corners = np.array([0, 1, sy, sy + 1, sx, sx + 1, sx + sy, sx + sy + 1], np.intp)[:, None]
+        _BOUNDS[shape] = (upper.astype(np.float32), upper, np.array([[nx - 2], [ny - 2], [nz - 2]], np.intp),
+                          np.array([sx, sy, 1], np.intp)[:, None], corners)
+    return _BOUNDS[shape]
+
+
+def trilinear_points(shape: tuple[int, int, int], points: NDArray) -> Trilinear:
+    """Weights to sample a grid of ``shape`` at index-space coordinates ``points`` (3, …), clamped to the grid.
+
+    Clamping the coordinates (not the result) makes a back-trace that leaves the box read the boundary value, as
+    in Stam's clamped semi-Lagrangian advection.  float32 points give float32 weights, others float64.
+    """
+    points = np.asarray(points)
+    upper32, upper64, last, strides, corners = _bounds(tuple(shape))
+    float32 = points.dtype == np.float32
+    c = np.maximum(points.reshape(3, -1), 0.0)  # = np.clip (NaN included), without its wrapper's cost
+    np.minimum(c, upper32 if float32 else upper64, out=c)
+    i = c.astype(np.intp)
+    np.minimum(i, last, out=i)
+    f = c - i.astype(np.float32 if float32 else np.float64)
+    i *= strides
+    base = i[0] + i[1]
+    base += i[2]
+    return Trilinear(base + corners, f[0], f[1], f[2], points.shape[1:])
 
 
 def trilinear_weights(shape: tuple[int, int, int], x: F32, y: F32, z: F32) -> Trilinear:
-    """Weights to sample a grid of ``shape`` at index-space coordinates (x, y, z), clamped to the grid.
-
-    Clamping the coordinates (not the result) makes a back-trace that leaves the box read the boundary value, as
-    in Stam's clamped semi-Lagrangian advection.
-    """
-    nx, ny, nz = shape
-    dtype = np.float32 if np.asarray(x).dtype == np.float32 else np.float64
-    coords = []
-    for c, n in ((x, nx), (y, ny), (z, nz)):
-        c = np.clip(c, 0.0, n - 1.0).astype(dtype, copy=False)
-        i = np.minimum(c.astype(np.intp), n - 2)
-        coords.append((i, c - i.astype(dtype)))
-    (i, fx), (j, fy), (k, fz) = coords
-    base = (i * ny + j) * nz + k
-    return Trilinear(base, fx, fy, fz, ny * nz, nz)
+    """:func:`trilinear_points` with the coordinates given one axis at a time."""
+    return trilinear_points(shape, np.stack(np.broadcast_arrays(x, y, z)))
 
 
 def sample(values: F32, x: F32, y: F32, z: F32) -> F32:
@@ -68,9 +95,20 @@ def sample(values: F32, x: F32, y: F32, z: F32) -> F32:
     return trilinear_weights(values.shape, x, y, z).gather(values)
 
 
+_STAGGER = {name: np.array(offset)[:, None] for name, offset in
+            (("u", (0.0, 0.5, 0.5)), ("v", (0.5, 0.0, 0.5)), ("w", (0.5, 0.5, 0.0)))}
+
+
 def sample_mac(u: F32, v: F32, w: F32, px: F32, py: F32, pz: F32) -> tuple[F32, F32, F32]:
     """Velocity at points given in cell units: each component from its own staggered grid."""
-    return (sample(u, px, py - 0.5, pz - 0.5), sample(v, px - 0.5, py, pz - 0.5), sample(w, px - 0.5, py - 0.5, pz))
+    return sample_mac_points(u, v, w, np.stack(np.broadcast_arrays(px, py, pz)))
+
+
+def sample_mac_points(u: F32, v: F32, w: F32, points: NDArray) -> tuple[F32, F32, F32]:
+    """:func:`sample_mac` at points (3, …) in cell units."""
+    points = np.asarray(points)
+    return tuple(trilinear_points(c.shape, points - _STAGGER[name].astype(points.dtype, copy=False)).gather(c)
+                 for name, c in (("u", u), ("v", v), ("w", w)))
 
 
 def upsample_linear(values: F32, factor: int) -> F32:
@@ -119,7 +157,8 @@ class Geometry:
     centres: tuple[F32, F32, F32]  # cell-centre coordinates in cell units, broadcastable (n,1,1) / (1,n,1) / (1,1,n)
     faces_1d: tuple[F32, F32, F32]  # face coordinates per axis (n+1) in cell units
     centres_1d: tuple[F32, F32, F32]  # centre coordinates per axis (n) in cell units
-    backtrace_bases: dict[str, tuple[F32, F32, F32]] = field(default_factory=dict)
+    backtrace_bases: dict[str, F32] = field(default_factory=dict)  # (3, …) sample coordinates of u, v, w, c grids
+    box_cells: F32 | None = None  # (3, 1, 1, 1) the box's size in cells (the back-traces' upper clamp)
 
     @classmethod
     def build(cls, shape: tuple[int, int, int], factor: int, extent) -> Geometry:
@@ -130,7 +169,8 @@ class Geometry:
         centres = tuple(c.reshape([-1 if a == i else 1 for a in range(3)]) for i, c in enumerate(centres_1d))
         g = cls(tuple(shape), tuple(n * factor for n in shape), int(factor), h, extent, centres, faces_1d,
                 centres_1d)
-        g.backtrace_bases = {name: g._full_grid(name) for name in ("u", "v", "w", "c")}
+        g.backtrace_bases = {name: np.stack(g._full_grid(name)) for name in ("u", "v", "w", "c")}
+        g.box_cells = np.array(shape, np.float32).reshape(3, 1, 1, 1)
         return g
 
     def _full_grid(self, name: str) -> tuple[F32, F32, F32]:
