@@ -18,7 +18,8 @@ BLAS, so a run repeats bit for bit).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import copy
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 from numpy.typing import NDArray
@@ -94,6 +95,11 @@ class _FlatLevel:
             children = self.interior(self.x).reshape(nx // 2, 2, ny // 2, 2, nz // 2, 2)
             assert np.shares_memory(children, self.x)  # a view: the prolongation adds in place
             self.x_children = children
+
+    def __deepcopy__(self, memo: dict) -> _FlatLevel:
+        """Snapshots deep-copy the hierarchy: copy the vectors and rebuild the views into the copies (a plain deep
+        copy would give views of copies that no longer alias the copied vectors)."""
+        return _FlatLevel(**{f.name: copy.deepcopy(getattr(self, f.name), memo) for f in fields(self) if f.init})
 
     def interior(self, vector: F32) -> F32:
         """The (nx, ny, nz) view of the real cells of a padded flat vector."""
