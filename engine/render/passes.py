@@ -62,10 +62,16 @@ def opaque_setup(view: View):
 
 # ---------------------------------------------------------------------------- sky
 class SkyFeature(RenderFeature):
-    """Sky gradient and sun, drawn after the opaque passes only where the depth is still at the far plane."""
+    """Sky gradient and sun, drawn after the opaque passes only where the depth is still at the far plane.
+
+    The gradient and the sun's halo cover the empty pixels; the disc (``pow(cos, 900)``) is drawn apart, over a
+    rectangle bounding the cone where it adds anything, instead of a branch every sky pixel pays for on a
+    software rasteriser.
+    """
 
     name = "sky"
     phase = SKY
+    DISC_COS = 0.98  # sun.frag: below this cosine the disc adds < 1e-6
 
     def add_passes(self, graph, view: View, data) -> None:
         def setup(b):
@@ -81,12 +87,19 @@ class SkyFeature(RenderFeature):
             self.ctx.enable(moderngl.DEPTH_TEST)
             self.ctx.depth_func = "<="
             s = self.renderer.settings
-            inv = np.linalg.inv(view.view_proj.astype(np.float64)).astype(np.float32)
-            set_uniforms(prog, inv_view_proj=inv.T.copy(), camera_pos=tuple(view.camera_pos),
-                         sky_top=tuple(s.sky_top), sky_horizon=tuple(s.sky_horizon),
-                         sun_dir=tuple(self.renderer.sun_direction), sun_color=tuple(self.renderer.sun_color),
-                         ortho=view.ortho, camera_forward=tuple(view.camera_forward))
+            inv = np.linalg.inv(view.view_proj.astype(np.float64))
+            ray = dict(inv_view_proj=inv.astype(np.float32).T.copy(), camera_pos=tuple(view.camera_pos),
+                       ortho=view.ortho, camera_forward=tuple(view.camera_forward))
+            sun = dict(sun_dir=tuple(self.renderer.sun_direction), sun_color=tuple(self.renderer.sun_color))
+            set_uniforms(prog, sky_top=tuple(s.sky_top), sky_horizon=tuple(s.sky_horizon), **ray, **sun)
             self._vao.render(moderngl.TRIANGLES, vertices=3)
+            rect = sun_rect(view, self.renderer.sun_direction, self.DISC_COS)
+            if rect is not None:
+                self.ctx.enable(moderngl.BLEND)
+                self.ctx.blend_func = moderngl.ONE, moderngl.ONE
+                set_uniforms(self._sun.program, rect=rect, **ray, **sun)
+                self._sun.render(moderngl.TRIANGLE_STRIP, vertices=4)
+                self.ctx.disable(moderngl.BLEND)
             self.ctx.depth_func = "<"
             fbo.depth_mask = True
 
@@ -97,7 +110,40 @@ class SkyFeature(RenderFeature):
             prog = self.renderer.program((SHADERS / "sky.vert").read_text(), (SHADERS / "sky.frag").read_text())
             self._vao = self.ctx.vertex_array(prog, [])
             self._prog = prog
+            sun = self.renderer.program((SHADERS / "sun.vert").read_text(), (SHADERS / "sun.frag").read_text())
+            self._sun = self.ctx.vertex_array(sun, [])
         return self._prog
+
+
+def sun_rect(view: View, sun_dir: np.ndarray, min_cos: float) -> tuple[float, float, float, float] | None:
+    """The rectangle (x0, y0, x1, y1, normalised device coordinates, clamped to the view) that holds every view
+    ray within ``acos(min_cos)`` of the sun's direction, or None when no such ray reaches the view.
+
+    The cone's rays are bounded by the square of half-size tan(angle) on the plane at unit distance along the
+    sun's direction; its corners are projected as directions (w = 0: points at infinity).  Orthographic views
+    share one ray (the camera's forward): the whole view, or nothing.
+    """
+    d = np.asarray(sun_dir, np.float64)
+    d = d / np.linalg.norm(d)
+    if view.ortho:
+        return (-1.0, -1.0, 1.0, 1.0) if float(np.dot(view.camera_forward, d)) > min_cos else None
+    half = float(np.tan(np.arccos(min_cos)))
+    a = np.cross(d, [0.0, 1.0, 0.0] if abs(d[1]) < 0.9 else [1.0, 0.0, 0.0])
+    a /= np.linalg.norm(a)
+    b = np.cross(d, a)
+    corners = np.array([d + half * (sa * a + sb * b) for sa in (-1, 1) for sb in (-1, 1)])
+    clip = np.concatenate([corners, np.zeros((4, 1))], axis=1) @ np.asarray(view.view_proj, np.float64).T
+    front = clip[:, 3] > 1e-6
+    if not front.any():  # the square, so the cone it spans, lies behind the camera
+        return None
+    if not front.all():  # the cone straddles the camera's plane: no finite rectangle bounds it
+        return (-1.0, -1.0, 1.0, 1.0)
+    ndc = clip[:, :2] / clip[:, 3:4]
+    x0, y0 = np.maximum(ndc.min(axis=0), -1.0)
+    x1, y1 = np.minimum(ndc.max(axis=0), 1.0)
+    if x0 >= x1 or y0 >= y1:
+        return None
+    return float(x0), float(y0), float(x1), float(y1)
 
 
 # ------------------------------------------------------------------------ terrain

@@ -1,5 +1,5 @@
 #version 330
-// Sky gradient with a sun disc, per pixel from the view ray of sky.vert.
+// Sky gradient and the sun's halo, per pixel from the view ray of sky.vert (the disc: sun.frag, over its rectangle).
 uniform vec3 sky_top;
 uniform vec3 sky_horizon;
 uniform vec3 sun_dir;
@@ -15,6 +15,5 @@ void main() {
     float s = max(dot(dir, sun_dir), 0.0);
     float s2 = s * s, s4 = s2 * s2;
     col += sun_color * (s4 * s4 * s4 * 0.25);  // halo: s^12 by squaring (a pow is exp2·log2 per pixel)
-    if (s > 0.98) col += sun_color * (pow(s, 900.0) * 30.0);  // disc: below 0.98 it adds < 1e-6
     frag = vec4(col, 1.0);
 }

@@ -204,3 +204,59 @@ def test_program_variants_define_names_in_every_stage_and_are_cached_apart(tmp_p
     fbo.release(), target.release()
     renderer.release()
     app.renderer = None
+
+
+def test_the_sun_rectangle_bounds_the_disc_and_vanishes_behind_the_camera():
+    from engine.render.components import look_at, perspective
+    from engine.render.feature import View
+    from engine.render.passes import sun_rect
+
+    def view(target):
+        eye = np.zeros(3)
+        proj, look = perspective(np.radians(60.0), 1.5, 0.1, 100.0), look_at(eye, np.asarray(target, float))
+        fwd = np.asarray(target, float) / np.linalg.norm(target)
+        return View("v", 300, 200, look.astype(np.float32), proj.astype(np.float32), eye.astype(np.float32),
+                    fwd.astype(np.float32), 0.1, 100.0, np.radians(60.0), False)
+
+    sun = np.array([0.0, 0.3, -1.0])
+    sun /= np.linalg.norm(sun)
+    v = view([0.0, 0.0, -1.0])
+    x0, y0, x1, y1 = sun_rect(v, sun, 0.98)
+    # every ray within the disc's cone lands inside: sample the cone's rim and project
+    a = np.cross(sun, [1.0, 0.0, 0.0]); a /= np.linalg.norm(a)
+    b = np.cross(sun, a)
+    angle = np.arccos(0.98)
+    for t in np.linspace(0, 2 * np.pi, 64):
+        ray = np.cos(angle) * sun + np.sin(angle) * (np.cos(t) * a + np.sin(t) * b)
+        clip = np.asarray(v.view_proj, float) @ np.append(ray, 0.0)
+        x, y = clip[:2] / clip[3]
+        assert x0 - 1e-6 <= np.clip(x, -1, 1) <= x1 + 1e-6 and y0 - 1e-6 <= np.clip(y, -1, 1) <= y1 + 1e-6
+    assert (x1 - x0) * (y1 - y0) < 0.5  # a small part of the view, not all of it (4 in NDC)
+    assert sun_rect(view([0.0, 0.0, 1.0]), sun, 0.98) is None  # looking away
+    assert sun_rect(view([1.0, 0.0, 0.0]), sun, 0.98) == (-1.0, -1.0, 1.0, 1.0)  # the cone straddles the eye's plane
+
+
+def test_the_sun_disc_shows_where_the_camera_looks_at_the_sun(tmp_path):
+    """The disc is drawn apart from the sky gradient (over its own rectangle): it must still be there, round
+    and centred on the sun's direction."""
+    scene = tmp_path / "sun.toml"
+    scene.write_text("""
+[scene]
+name = "sun"
+[render]
+sun_direction = [0.0, 0.0, -1.0]
+fog_density = 0.0
+[[entities]]
+name = "camera"
+[entities.components.Transform]
+[entities.components.Camera]
+fov = 40.0
+controller = "none"
+""")
+    app = App(scene)
+    image = np.asarray(render_app(app, 64, 64, frames=1), np.float64)[..., :3].sum(axis=-1)
+    assert image[24:40, 24:40].max() >= 750  # the disc: near white (R + G + B of 255 each at most)
+    assert image[:8, :8].max() < 700 and image[-8:, -8:].max() < 700  # the sky and halo away from it
+    ys, xs = np.nonzero(image > 730)
+    assert 20 < len(xs) < 400  # a disc, not the sky
+    assert abs(xs.mean() - 31.5) < 1.5 and abs(ys.mean() - 31.5) < 1.5  # centred on the sun's direction
