@@ -303,8 +303,8 @@ def added_points(sections: Sections, entities: I64, grid: Grid) -> tuple[AddedPo
     if n == 0:
         return AddedPoints.empty(), sections
     order = sort_key.argsort(kind="stable")
-    uv, kind, body = uv[order], kind[order], body[order]
-    keys = (entities[body].astype(np.int64) << 32) | keys[order]
+    uv, kind, body = uv.take(order, axis=0), kind.take(order), body.take(order)
+    keys = (entities.take(body).astype(np.int64) << 32) | keys.take(order)
     nxt = np.arange(1, n + 1)
     if body[0] == body[-1]:  # one outline: it closes on its first point
         nxt[-1] = 0
@@ -314,7 +314,8 @@ def added_points(sections: Sections, entities: I64, grid: Grid) -> tuple[AddedPo
         np.not_equal(body[1:], body[:-1], out=change[1:n])
         last = change[1:]
         nxt[last] = np.flatnonzero(change[:n])
-    keep = all_of((uv >= 0.0) & (uv <= (grid.nx - 1, grid.nz - 1)), axis=1)  # on the grid's footprint
+    u, v = uv[:, 0], uv[:, 1]
+    keep = (u >= 0.0) & (u <= grid.nx - 1) & (v >= 0.0) & (v <= grid.nz - 1)  # on the grid's footprint
     if all_of(keep, axis=None):
         segments = np.empty((n, 2), np.int64)
         segments[:, 0] = np.arange(n)
@@ -334,19 +335,21 @@ def _outline(sections: Sections, strict: bool):
     the outline: body, edge, t); None if, with ``strict``, an edge crosses a grid vertex. Both families of grid
     lines (u = i: axis 0, v = j: axis 1) are handled in one pass over the (edge, axis) pairs."""
     e = sections.edges
-    eb, ek = e.valid.nonzero()
-    a, d = e.start[:, eb, ek], e.e[:, eb, ek]  # (2, E): row 0 u, row 1 v
-    n = len(eb)
-    base = (eb * sections.polygons.shape[1] + ek).astype(np.float64) * 2.0  # edge index; t ∈ (0, 1) after it
+    width = sections.polygons.shape[1]
+    real = e.valid.ravel().nonzero()[0]  # flat (body, edge) index of the real edges
+    eb = real // width
+    a, d = e.start.reshape(2, -1).take(real, axis=1), e.e.reshape(2, -1).take(real, axis=1)  # (2, E): u, v rows
+    n = len(real)
+    base = real.astype(np.float64) * 2.0  # edge index; t ∈ (0, 1) after it
     b = a + d
     lo = np.floor(np.minimum(a, b)).astype(np.int64)
     hi = np.floor(np.maximum(a, b)).astype(np.int64)
     run, line = ranges((lo + 1).ravel(), (hi - lo).ravel())  # run = axis·E + edge
     axis, edge = np.divmod(run, max(n, 1))
     af, df = a.ravel(), d.ravel()
-    t = (line - af[run]) / df[run]
+    t = (line - af.take(run)) / df.take(run)
     across = run + np.where(axis == 0, n, -n)  # the same edge, the other coordinate
-    other = af[across] + t * df[across]
+    other = af.take(across) + t * df.take(across)
     if strict and any_of((np.abs(other - np.rint(other)) < EPS_LINE) & (axis == 0), axis=None):
         return None
     on_u = axis == 0
@@ -359,9 +362,9 @@ def _outline(sections: Sections, strict: bool):
     kind[:n] = 2
     kind[n:] = axis
     keys = np.empty(n + m, np.int64)
-    keys[:n] = sections.vertex_feature[eb, ek] << 22
-    keys[n:] = (sections.edge_feature[eb, ek][edge] << 22) | (axis << 21) | line | _CROSSING_KEY
-    return uv, kind, keys, np.concatenate([eb, eb[edge]]), np.concatenate([base, base[edge] + t])
+    keys[:n] = sections.vertex_feature.ravel().take(real) << 22
+    keys[n:] = (sections.edge_feature.ravel().take(real).take(edge) << 22) | (axis << 21) | line | _CROSSING_KEY
+    return uv, kind, keys, np.concatenate([eb, eb.take(edge)]), np.concatenate([base, base.take(edge) + t])
 
 
 # ---------------------------------------------------------------------------------------- wave generation
@@ -460,13 +463,14 @@ def solid_vertices(sections: Sections, grid: Grid) -> tuple[I64, I64]:
     body, row = ranges(lo, np.maximum(hi - lo + 1, 0))
     if len(body) == 0:
         return body, body
-    a, d = _per_point(e.start, body, 1), _per_point(e.e, body, 1)  # (2, R, V)
-    flat = d[1] != 0.0
-    t = (row[:, None] - a[1]) / np.where(flat, d[1], np.inf)
-    u = a[0] + t * d[0]
-    crosses = (t >= 0.0) & (t < 1.0) & (flat & _per_point(e.valid, body))
-    left = min_of(np.where(crosses, u, np.inf), axis=1)
-    right = max_of(np.where(crosses, u, -np.inf), axis=1)
+    table = e.table  # edge-major rows: (V, R) arrays against the rows (R,)
+    au, av, du, dv = (table[r].take(body, axis=1) for r in range(4))
+    flat = dv != 0.0
+    t = (row - av) / np.where(flat, dv, np.inf)
+    u = au + t * du
+    crosses = (t >= 0.0) & (t < 1.0) & (flat & (table[8].take(body, axis=1) == 0.0))
+    left = min_of(np.where(crosses, u, np.inf), axis=0)
+    right = max_of(np.where(crosses, u, -np.inf), axis=0)
     ok = (left < np.inf) & (right > -np.inf)
     first = np.where(ok, np.maximum(np.floor(np.where(ok, left, 0.0) + 1e-9) + 1, 0), 0).astype(np.int64)
     last = np.where(ok, np.minimum(np.ceil(np.where(ok, right, 0.0) - 1e-9) - 1, grid.nx - 1), -1).astype(np.int64)

@@ -65,6 +65,8 @@ def plane_levels(z: F64, solid: np.ndarray, bodies: Bodies, grid: Grid) -> F64:
     n_water = np.bincount(body, water, len(bodies))
     wet = np.bincount(body, np.where(water, height, 0.0), len(bodies)) / np.maximum(n_water, 1)
     every = np.bincount(body, height, len(bodies)) / np.maximum(count, 1)
+    if all_of(n_water > 0, axis=None):
+        return wet
     return np.where(n_water > 0, wet, np.where(count > 0, every, bilinear(z, centre)))
 
 
@@ -209,7 +211,7 @@ def step_water(state: WaterState, cfg: WaterSurface, grid: Grid, bodies: Bodies,
         new, new_points, points, previous_points = _grid_step(state, cfg, grid, bodies, plane_y, k, report)
     # Keep the water's volume: drops, impacts, points coming and going and vertices changing between water and
     # body move the mean level a little; shift it back (heights at t and t + 1 alike: no velocity).
-    mean = _water_mean(new, report.solid if len(report.solid) else None)
+    mean = _water_mean(new, _solid_index(state) if cfg.wave_source == "outline" else None)
     shift = volume - mean
     if shift != 0.0:
         z += shift
@@ -245,8 +247,15 @@ def _outline_step(state, cfg, grid, bodies, sections, levels, plane_y, k, report
     solid, solid_body = solid_vertices(sections, grid)
     state.solid = np.zeros(z.shape, bool)
     state.solid.ravel()[solid] = True
-    # one body: its scanline order is ascending and without repeats, as ``state.solid.nonzero()`` would give
-    state.solid_index = (state.solid, solid) if len(bodies) == 1 else None
+    # the vertices inside bodies once each and ascending, as ``state.solid.nonzero()`` gives them (the water's
+    # mean level sums them in this order): the scanlines sorted, unless bodies overlap
+    if len(bodies) == 1:
+        unique = solid
+    elif np.count_nonzero(state.solid) == len(solid):
+        unique = np.sort(solid)
+    else:
+        unique = state.solid.ravel().nonzero()[0]
+    state.solid_index = (state.solid, unique)
     pairs = coupling_pairs(points, state.solid, grid, solid_mask=True, slots=_slots(state))
     new, new_points = propagate(z, zp, k, state.coefficient, state.degree, solid, pairs, heights, previous,
                                 _scratch(state), reuse=True, solid_mask=state.solid, slots=_slots(state))
