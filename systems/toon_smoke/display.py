@@ -109,11 +109,12 @@ def _splat_group(flat: F32, shape: tuple[int, ...], centres, directions, along, 
     t *= t
     t *= inv_a2 - inv_b2
     dist2 *= inv_b2
-    t += dist2  # 1 − q² (q² of the docstring of :func:`splat_blobs`)
-    rows, cols = np.nonzero(t < 1.0)  # q = 1 − that > 0 exactly where that < 1 (Sterbenz: 1 − x is exact there)
-    q = 1.0 - t[rows, cols]
+    t += dist2  # 1 − q (q of the docstring of :func:`splat_blobs`)
+    keep = np.flatnonzero(t < 1.0)  # q = 1 − that > 0 exactly where that < 1 (Sterbenz: 1 − x is exact there)
+    q = 1.0 - t.reshape(-1)[keep]
     base_flat = (base[:, 0] * shape[1] + base[:, 1]) * shape[2] + base[:, 2]
-    np.add.at(flat, base_flat[rows] + offset_flat[cols], np.float32(amplitude) * q * q * q)
+    index = (base_flat[:, None] + offset_flat).reshape(-1)[keep]
+    np.add.at(flat, index, np.float32(amplitude) * q * q * q)
 
 
 def noise_factor(geo: Geometry, seed: int, scale: float, strength: float, octaves: int) -> F32:

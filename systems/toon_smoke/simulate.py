@@ -23,7 +23,7 @@ from engine.spatial import Transform, quat_conjugate, quat_rotate
 from engine.world import World
 from systems.toon_smoke import fluid, poisson
 from systems.toon_smoke.display import blob_axes, extract_isosurface, noise_factor, splat_blobs
-from systems.toon_smoke.grid import Geometry, sample, sample_mac, upsample_linear
+from systems.toon_smoke.grid import Geometry, sample_mac_points, trilinear_points, upsample_linear
 
 _UP = np.array([0.0, 1.0, 0.0])
 
@@ -232,8 +232,7 @@ def spawn_positions(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, rng: np.r
 
 def particle_velocity(geo: Geometry, state: ToonSmokeState, local: np.ndarray) -> np.ndarray:
     """Fluid velocity (m/s) at local positions, each component from its staggered grid."""
-    cells = geo.to_cells(local)
-    return np.stack(sample_mac(state.u, state.v, state.w, cells[:, 0], cells[:, 1], cells[:, 2]), axis=-1)
+    return np.stack(sample_mac_points(state.u, state.v, state.w, geo.to_cells(local).T), axis=-1)
 
 
 def advect_particles(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, dt: float, rng: np.random.Generator
@@ -314,7 +313,7 @@ def add_particle_blobs(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, displa
     if len(state.particles) == 0:
         return 0
     cells = geo.to_cells(state.particles) * geo.factor - 0.5  # display index space
-    rho = sample(display, cells[:, 0], cells[:, 1], cells[:, 2])
+    rho = trilinear_points(display.shape, cells.T).gather(display)
     active = rho > cfg.particle_density_threshold
     if not active.any():
         return 0
