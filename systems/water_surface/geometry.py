@@ -66,9 +66,13 @@ class Bodies:
         return len(self.entities)
 
     def take(self, index) -> Bodies:
-        extent = None if self._extent is None else self._extent[index]
-        return Bodies(self.entities[index], self.shapes[index], self.half[index], self.radius[index],
-                      self.position[index], self.rotation[index], extent)
+        index = np.asarray(index)
+        if index.dtype == bool:
+            index = index.nonzero()[0]
+        extent = None if self._extent is None else self._extent.take(index, axis=0)
+        return Bodies(self.entities.take(index), self.shapes.take(index), self.half.take(index, axis=0),
+                      self.radius.take(index), self.position.take(index, axis=0),
+                      self.rotation.take(index, axis=0), extent)
 
     def extent(self) -> F64:
         """(B, 3) half size of each body's axis-aligned bounding box in x, y, z (computed once)."""

@@ -17,6 +17,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -197,36 +198,40 @@ def cross_sections(bodies: Bodies, plane_y: F64, grid: Grid, sphere_segments: in
 def _box_edge_faces(feature: I64, counts: I64) -> I64:
     """The face each polygon edge lies on: the one its two box edges share."""
     k = np.arange(_MAX_BOX_VERTICES)
-    nxt = feature[np.arange(len(feature))[:, None], np.where(k + 1 < counts[:, None], k + 1, 0)]
-    shared = _SHARED_FACE[feature, nxt]
+    following = np.where(k + 1 < counts[:, None], k + 1, 0) + (_MAX_BOX_VERTICES * np.arange(len(feature)))[:, None]
+    shared = _SHARED_FACE.ravel().take(feature * 12 + feature.ravel().take(following))
     return np.where(shared >= 0, shared, 6 + k)
 
 
+_CORNERS_T = np.ascontiguousarray(_SIGNS.T)  # (3, 8): the corners coordinate-major
+
+
 def _box_sections(bodies: Bodies, plane_y: F64, grid: Grid) -> tuple[F64, I64, I64]:
-    local = _SIGNS * bodies.half[:, None, :]
-    corners = local @ bodies.rotation.transpose(0, 2, 1) + bodies.position[:, None, :]  # (B, 8, 3) world
-    ends = corners[:, _EDGES]  # (B, 12, 2, 3): the two corners Q, R of every edge
-    y = ends[..., 1] - plane_y[:, None, None]
-    above = y >= 0.0
-    straddle = above[..., 0] != above[..., 1]
-    ya = y[..., 0]
-    t = ya / np.where(straddle, ya - y[..., 1], 1.0)  # L = Q + t·(R − Q) on the plane
-    q, r = ends[:, :, 0, ::2], ends[:, :, 1, ::2]
-    points = grid.to_uv(q + t[..., None] * (r - q))
-    return _sort_ccw(points, straddle, exact=bool(any_of(y == 0.0, axis=None)))
+    corners = bodies.rotation @ (_CORNERS_T * bodies.half[:, :, None]) + bodies.position[:, :, None]  # (B, 3, 8)
+    q, r = corners.take(_EA, axis=2), corners.take(_EB, axis=2)  # (B, 3, 12): the two corners Q, R of each edge
+    yq, yr = q[:, 1] - plane_y[:, None], r[:, 1] - plane_y[:, None]
+    straddle = (yq >= 0.0) != (yr >= 0.0)
+    t = yq / np.where(straddle, yq - yr, 1.0)  # L = Q + t·(R − Q) on the plane
+    u = (q[:, 0] + t * (r[:, 0] - q[:, 0]) - grid.x0) / grid.h
+    v = (q[:, 2] + t * (r[:, 2] - q[:, 2]) - grid.z0) / grid.h
+    exact = bool(any_of(yq == 0.0, axis=None) or any_of(yr == 0.0, axis=None))
+    return _sort_ccw(u, v, straddle, exact)
 
 
-def _sort_ccw(points: F64, valid: np.ndarray, exact: bool) -> tuple[F64, I64, I64]:
-    """The valid points of each row counter-clockwise about their centroid (first 6 columns), their count and
-    the column each came from; with ``exact`` (a box corner on the plane) repeated points are dropped."""
+def _sort_ccw(u: F64, v: F64, valid: np.ndarray, exact: bool) -> tuple[F64, I64, I64]:
+    """The valid points (u, v) of each row counter-clockwise about their centroid (first 6 columns), their count
+    and the column each came from; with ``exact`` (a box corner on the plane) repeated points are dropped."""
     n = sum_of(valid, axis=1, dtype=np.int64)
-    centre = sum_of(np.where(valid[..., None], points, 0.0), axis=1) / np.maximum(n, 1)[:, None]
-    d = points - centre[:, None, :]
-    angle = np.where(valid, np.arctan2(d[..., 1], d[..., 0]), np.inf)
+    inv = 1.0 / np.maximum(n, 1)
+    cu = sum_of(np.where(valid, u, 0.0), axis=1) * inv
+    cv = sum_of(np.where(valid, v, 0.0), axis=1) * inv
+    angle = np.where(valid, np.arctan2(v - cv[:, None], u - cu[:, None]), np.inf)
     order = angle.argsort(axis=1, kind="stable")[:, :_MAX_BOX_VERTICES]
-    rows = np.arange(len(points))[:, None]
-    polygons = points[rows, order]
+    flat = order + (u.shape[1] * np.arange(len(u)))[:, None]
+    polygons = np.empty(flat.shape + (2,))
+    polygons[..., 0], polygons[..., 1] = u.ravel().take(flat), v.ravel().take(flat)
     if exact:  # a box vertex on the plane gives the same L' from several edges: keep one
+        rows = np.arange(len(u))[:, None]
         k = np.arange(_MAX_BOX_VERTICES)
         prev = polygons[rows, np.where(k == 0, n[:, None] - 1, k - 1).clip(0)]
         repeat = (k < n[:, None]) & (np.sum((polygons - prev) ** 2, axis=-1) < 1e-20) & (k > 0)
@@ -236,14 +241,21 @@ def _sort_ccw(points: F64, valid: np.ndarray, exact: bool) -> tuple[F64, I64, I6
     return polygons, np.where(n >= 3, n, 0), order
 
 
+@lru_cache(maxsize=8)
+def _ring(segments: int) -> F64:
+    """(segments, 2) unit circle counter-clockwise in (u, v)."""
+    angles = 2.0 * np.pi * np.arange(segments) / segments
+    ring = np.stack([np.cos(angles), np.sin(angles)], axis=-1)
+    ring.setflags(write=False)
+    return ring
+
+
 def _sphere_sections(bodies: Bodies, plane_y: F64, grid: Grid, segments: int) -> tuple[F64, I64]:
     d = plane_y - bodies.position[:, 1]
     rho2 = bodies.radius ** 2 - d ** 2
     rho = np.sqrt(np.maximum(rho2, 0.0)) / grid.h
-    angles = 2.0 * np.pi * np.arange(segments) / segments
-    ring = np.stack([np.cos(angles), np.sin(angles)], axis=-1)  # counter-clockwise in (u, v)
-    centre = grid.to_uv(bodies.position[:, [0, 2]])
-    polygons = centre[:, None, :] + rho[:, None, None] * ring[None, :, :]
+    centre = grid.to_uv(bodies.position[:, ::2])
+    polygons = centre[:, None, :] + rho[:, None, None] * _ring(segments)[None, :, :]
     return polygons, np.where(rho2 > 0.0, segments, 0).astype(np.int64)
 
 
