@@ -44,6 +44,9 @@ class CameraConfig(ConfigModel):
     hide_features: list[str] = Field(default_factory=list, max_length=32,
                                      description="Render features not drawn in this view (e.g. 'grass_field' "
                                                  "in a minimap).")
+    update_interval: int = Field(1, ge=1, le=60,
+                                 description="Render this view every N frames and show its last picture in "
+                                             "between (minimaps, monitors); the main view always renders.")
     enabled: bool = True
 
     @model_validator(mode="after")

@@ -120,6 +120,7 @@ class Renderer:
         self.fps = 0.0
         self._last_draw: float | None = None
         self._final: moderngl.Texture | None = None
+        self._held: dict[int, moderngl.Texture] = {}  # camera entity -> kept picture of a view rendered every N frames
         self._final_fbo: moderngl.Framebuffer | None = None
         self._resize_final()
         from engine.render.passes import builtin_features
@@ -260,6 +261,7 @@ class Renderer:
         v.extra["rect"] = rect
         v.extra["border"] = tuple(cfg.border_color)
         v.extra["hide"] = frozenset(cfg.hide_features)
+        v.extra["interval"] = 1 if main else int(cfg.update_interval)
         return v
 
     # --------------------------------------------------------------------- frame
@@ -281,7 +283,10 @@ class Renderer:
         graph.reset()
         timed = _TimedGraph(graph, self.timer)
         final = graph.import_resource("final", self._final, TextureDesc(self.width, self.height, "rgba8"))
+        self._plan_held_views()
         for view in self.views:
+            if view.extra.get("held") == "shown":  # its last picture is shown again: nothing to draw
+                continue
             self._declare_view_targets(timed, view)
             hidden = view.extra.get("hide", ())
             for index, feature in self._ordered:
@@ -320,6 +325,33 @@ class Renderer:
 
         graph.add_pass(f"clear.{view.name}", setup, execute)
 
+    def _plan_held_views(self) -> None:
+        """Mark the views rendered every N frames (``Camera.update_interval``): "rendered" into their kept picture
+        this frame, or "shown" (the kept picture again).  A view renders on frames where the frame index is a
+        multiple of N, and whenever its kept picture is missing or of another size (first frame, resize, a
+        viewport change)."""
+        live = set()
+        for view in self.views:
+            interval = view.extra.get("interval", 1)
+            if interval <= 1:
+                continue
+            key = view.camera_entity
+            live.add(key)
+            held = self._held.get(key)
+            size = (view.width, view.height)
+            if held is None or held.size != size:
+                if held is not None:
+                    self._free_resource(held)
+                held = self._held[key] = self.ctx.texture(size, 4)
+                held.filter = (moderngl.LINEAR, moderngl.LINEAR)
+                held.repeat_x = held.repeat_y = False
+                view.extra["held"] = "rendered"
+            else:
+                view.extra["held"] = "rendered" if self.frame_index % interval == 0 else "shown"
+            view.extra["held_texture"] = held
+        for key in [k for k in self._held if k not in live]:  # cameras gone or back to every frame
+            self._free_resource(self._held.pop(key))
+
     def _declare_present(self, graph, final, view: View, first: bool):
         """Tone-map ``view`` into its rectangle of the window image.
 
@@ -333,7 +365,19 @@ class Renderer:
         out = {}
         x, y, w, h = view.extra["rect"]
         source = view.color
-        if (view.width, view.height) != (w, h):
+        held = view.extra.get("held")
+        if held is not None:  # tone-mapped into the kept picture when rendered; presented from it every frame
+            out["ldr"] = graph.import_resource(f"{view.name}.held", view.extra["held_texture"],
+                                               TextureDesc(view.width, view.height, "rgba8"))
+            if held == "rendered":
+                def held_setup(b):
+                    b.read(view.color)
+                    out["ldr"] = b.write(out["ldr"])
+
+                graph.add_pass(f"tonemap.{view.name}", held_setup,
+                               lambda pc: tonemap_execute(self, pc, view, out["ldr"]))
+            source = None
+        elif (view.width, view.height) != (w, h):
             def tonemap_setup(b):
                 b.read(view.color)
                 out["ldr"] = b.write(b.create(f"{view.name}.ldr", TextureDesc(view.width, view.height, "rgba8")))
@@ -369,6 +413,9 @@ class Renderer:
     def release(self) -> None:
         for f in self.features:
             f.release()
+        for tex in self._held.values():
+            self._free_resource(tex)
+        self._held.clear()
         self.graph.pool.clear()
         for fbo in self._framebuffers.values():
             fbo.release()

@@ -7,7 +7,7 @@ import moderngl
 import numpy as np
 
 from engine.app import App
-from engine.render.components import CameraConfig, Hud, build_camera
+from engine.render.components import Camera, CameraConfig, Hud, build_camera
 from engine.spatial import Transform
 from tests.render_utils import assert_golden, make_renderer, render_app
 
@@ -260,3 +260,34 @@ controller = "none"
     ys, xs = np.nonzero(image > 730)
     assert 20 < len(xs) < 400  # a disc, not the sky
     assert abs(xs.mean() - 31.5) < 1.5 and abs(ys.mean() - 31.5) < 1.5  # centred on the sun's direction
+
+
+def test_a_view_with_an_update_interval_renders_every_nth_frame_and_shows_its_last_picture_between():
+    from engine.registry import BuildContext
+
+    app = App(SCENE)
+    e = app.world.spawn(Transform())
+    cfg = CameraConfig(controller="top", projection="orthographic", ortho_height=40.0, viewport=[0.6, 0.6, 0.4, 0.4],
+                       priority=5, update_interval=3)
+    app.world.add(e, build_camera(cfg, BuildContext(app.world, e, "minimap", "", None)))
+    renderer = make_renderer(app, 160, 100)
+    drawn, pictures = [], []
+    terrain = next(f for f in renderer.features if f.name == "terrain")
+    for frame in range(7):
+        terrain.last_triangles.clear()
+        angle = 0.4 * frame  # the light changes every frame: a rendered picture shows it
+        renderer.sun_direction = np.array([np.cos(angle), 1.0, np.sin(angle)], np.float32) / np.sqrt(2.0)
+        app.step(1)
+        app.render_frame()
+        drawn.append("view1" in terrain.last_triangles)
+        pictures.append(np.asarray(renderer.read_image(), np.int16)[: 40, 96:])  # the minimap's rectangle
+    assert drawn == [True, False, False, True, False, False, True]
+    assert all(np.array_equal(pictures[i], pictures[0]) for i in (1, 2))  # the kept picture, not a blank
+    assert not np.array_equal(pictures[3], pictures[0])  # rendered again: the new light shows
+    # a new viewport size renders at once, whatever the frame
+    app.world.get(e, Camera).config = cfg.model_copy(update={"viewport": (0.5, 0.5, 0.5, 0.5)})
+    terrain.last_triangles.clear()
+    app.render_frame()
+    assert "view1" in terrain.last_triangles
+    renderer.release()
+    app.renderer = None
