@@ -155,7 +155,7 @@ class Geometry:
     faces_1d: tuple[F32, F32, F32]  # face coordinates per axis (n+1) in cell units
     centres_1d: tuple[F32, F32, F32]  # centre coordinates per axis (n) in cell units
     backtrace_bases: dict[str, F32] = field(default_factory=dict)  # (3, …) sample coordinates of u, v, w, c grids
-    box_cells: F32 | None = None  # (3, 1, 1, 1) the box's size in cells (the back-traces' upper clamp)
+    _sphere_masks: dict = field(default_factory=dict, repr=False)  # see sphere_mask
 
     @classmethod
     def build(cls, shape: tuple[int, int, int], factor: int, extent) -> Geometry:
@@ -167,7 +167,6 @@ class Geometry:
         g = cls(tuple(shape), tuple(n * factor for n in shape), int(factor), h, extent, centres, faces_1d,
                 centres_1d)
         g.backtrace_bases = {name: np.stack(g._full_grid(name)) for name in ("u", "v", "w", "c")}
-        g.box_cells = np.array(shape, np.float32).reshape(3, 1, 1, 1)
         return g
 
     def _full_grid(self, name: str) -> tuple[F32, F32, F32]:
@@ -178,6 +177,23 @@ class Geometry:
             axes[a] = self.faces_1d[a]
         grids = np.meshgrid(*axes, indexing="ij")
         return tuple(np.ascontiguousarray(g, dtype=np.float32) for g in grids)
+
+    def sphere_mask(self, grid: str, centre, radius: float) -> NDArray[np.bool_]:
+        """Samples of the cell centres (``"c"``) or of the u / v / w faces strictly inside a sphere (local metres).
+
+        Sources test the same spheres every step: the last few masks are kept (read-only) per grid, centre and
+        radius.
+        """
+        key = (grid, tuple(float(c) for c in centre), float(radius))
+        mask = self._sphere_masks.get(key)
+        if mask is None:
+            x, y, z = self.local_centres() if grid == "c" else self.local_faces("uvw".index(grid))
+            mask = (x - centre[0]) ** 2 + (y - centre[1]) ** 2 + (z - centre[2]) ** 2 < radius ** 2
+            mask.flags.writeable = False
+            if len(self._sphere_masks) >= 32:  # scripts may move sources every step: keep the cache small
+                self._sphere_masks.clear()
+            self._sphere_masks[key] = mask
+        return mask
 
     # -- conversions between local metres and cell units
     def to_cells(self, local: NDArray[np.float64]) -> NDArray[np.float64]:

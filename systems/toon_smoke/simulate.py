@@ -127,12 +127,11 @@ def apply_sources(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, dt: float,
     """Each active source adds density and heat inside its sphere and imposes its velocity (plus its seeded jitter)
     there, in place."""
     geo = _geometry(cfg, state)
-    x, y, z = geo.local_centres()
     for source in state.sources:
         if not source.active(state.time):
             continue
         p = source.position
-        inside = ((x - p[0]) ** 2 + (y - p[1]) ** 2 + (z - p[2]) ** 2) < source.radius ** 2
+        inside = geo.sphere_mask("c", p, source.radius)
         state.density += np.float32(source.density_rate * dt) * inside
         state.temperature += np.float32(source.temperature_rate * dt) * inside
         if source.radial_speed != 0.0:
@@ -148,9 +147,7 @@ def apply_sources(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, dt: float,
 def impose_velocity(geo: Geometry, state: ToonSmokeState, centre, radius: float, velocity) -> None:
     """Set the face velocities inside a sphere to ``velocity`` (a jet or a chimney's draught), in place."""
     for axis, comp in enumerate((state.u, state.v, state.w)):
-        fx, fy, fz = geo.local_faces(axis)
-        inside = (fx - centre[0]) ** 2 + (fy - centre[1]) ** 2 + (fz - centre[2]) ** 2 < radius ** 2
-        np.copyto(comp, np.float32(velocity[axis]), where=inside)
+        np.copyto(comp, np.float32(velocity[axis]), where=geo.sphere_mask("uvw"[axis], centre, radius))
 
 
 def velocity_step(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, dt: float, up_local: np.ndarray,
