@@ -54,20 +54,26 @@ class PerlinNoise:
         permutation = np.random.Generator(np.random.PCG64(self.seed)).permutation(256).astype(np.int64)
         self._perm = np.concatenate([permutation, permutation])
         self._perm.setflags(write=False)
+        # the gradient of each hash h, _GRADIENTS[perm[h] & 15], one table per component: three gathers from
+        # 512-entry tables instead of a permutation gather and a row gather of the (16, 3) table (same values)
+        self._grad = tuple(np.ascontiguousarray(_GRADIENTS[self._perm & 15, axis]) for axis in range(3))
 
     def noise3(self, x: ArrayLike, y: ArrayLike, z: ArrayLike) -> NDArray[np.float64]:
         """3D improved Perlin noise (Perlin 2002): hash the 8 cell corners through the permutation, dot each
         corner's gradient ``_GRADIENTS[hash & 15]`` with the offset to the point, blend with the quintic fade."""
-        x, y, z = np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in (x, y, z)))
+        # per-axis terms on the inputs as given (broadcast lazily: a grid's axes stay 1-D until they meet)
+        x, y, z = (np.asarray(v, dtype=np.float64) for v in (x, y, z))
+        shape = np.broadcast_shapes(x.shape, y.shape, z.shape)
         (xi, xf), (yi, yf), (zi, zf) = _split(x), _split(y), _split(z)
         u, v, w = _fade(xf), _fade(yf), _fade(zf)
         p = self._perm
         a, b = p[xi] + yi, p[xi + 1] + yi
         aa, ab, ba, bb = p[a] + zi, p[a + 1] + zi, p[b] + zi, p[b + 1] + zi
 
+        gx, gy, gz = self._grad
+
         def grad(h: NDArray[np.int64], dx, dy, dz) -> NDArray[np.float64]:
-            g = _GRADIENTS[p[h] & 15]
-            return g[..., 0] * dx + g[..., 1] * dy + g[..., 2] * dz
+            return gx.take(h) * dx + gy.take(h) * dy + gz.take(h) * dz
 
         x1, y1, z1 = xf - 1.0, yf - 1.0, zf - 1.0
         near = _lerp(
@@ -80,21 +86,23 @@ class PerlinNoise:
             _lerp(u, grad(aa + 1, xf, yf, z1), grad(ba + 1, x1, yf, z1)),
             _lerp(u, grad(ab + 1, xf, y1, z1), grad(bb + 1, x1, y1, z1)),
         )
-        return np.asarray(_lerp(w, near, far), dtype=np.float64)
+        return np.broadcast_to(np.asarray(_lerp(w, near, far), dtype=np.float64), shape).copy()
 
     def noise2(self, x: ArrayLike, y: ArrayLike) -> NDArray[np.float64]:
         """2D improved Perlin noise: the z = 0 slice of :meth:`noise3` (Perlin 2002 with z = 0), evaluated with
         only the 4 corners that slice touches, so ``noise2(x, y) == noise3(x, y, 0)`` exactly."""
-        x, y = np.broadcast_arrays(np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64))
+        x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
+        shape = np.broadcast_shapes(x.shape, y.shape)
         (xi, xf), (yi, yf) = _split(x), _split(y)
         u, v = _fade(xf), _fade(yf)
         p = self._perm
         a, b = p[xi] + yi, p[xi + 1] + yi
         aa, ab, ba, bb = p[a], p[a + 1], p[b], p[b + 1]  # + zi with zi = 0
 
+        gx, gy, _ = self._grad
+
         def grad(h: NDArray[np.int64], dx, dy) -> NDArray[np.float64]:
-            g = _GRADIENTS[p[h] & 15]
-            return g[..., 0] * dx + g[..., 1] * dy
+            return gx.take(h) * dx + gy.take(h) * dy
 
         x1, y1 = xf - 1.0, yf - 1.0
         result = _lerp(
@@ -102,7 +110,7 @@ class PerlinNoise:
             _lerp(u, grad(aa, xf, yf), grad(ba, x1, yf)),
             _lerp(u, grad(ab, xf, y1), grad(bb, x1, y1)),
         )
-        return np.asarray(result, dtype=np.float64)
+        return np.broadcast_to(np.asarray(result, dtype=np.float64), shape).copy()
 
     def fbm3(
         self,

@@ -124,7 +124,7 @@ def noise_factor(geo: Geometry, seed: int, scale: float, strength: float, octave
     """
     if strength == 0.0:
         return np.ones(geo.display_shape, np.float32)
-    x, y, z = np.broadcast_arrays(*geo.local_display_centres())
+    x, y, z = geo.local_display_centres()  # per-axis: the noise broadcasts them as late as it can (same values)
     n = PerlinNoise(seed).fbm3(x / scale, y / scale, z / scale, octaves=octaves)
     return np.maximum(0.0, 1.0 + strength * n).astype(np.float32)
 

@@ -122,3 +122,15 @@ def test_fbm_octaves_are_normalized_sums():
     np.testing.assert_allclose(noise.fbm2(x, y, octaves=2, gain=0.25), expected2, atol=1e-15)
     with pytest.raises(ValueError, match="octaves"):
         noise.fbm2(x, y, octaves=0)
+
+
+def test_grid_axes_give_the_bits_of_the_full_grid():
+    """Per-axis inputs are broadcast as late as possible (a grid's hashing runs on its (x, y) plane, not on
+    every cell); the values must be those of the fully broadcast arrays, bit for bit."""
+    n = PerlinNoise(11)
+    ax = np.linspace(-2.3, 5.1, 17)
+    x, y, z = ax[:, None, None], 1.7 * ax[None, :, None], -0.6 * ax[None, None, :]
+    full = n.fbm3(*np.broadcast_arrays(x, y, z), octaves=3)
+    lazy = n.fbm3(x, y, z, octaves=3)
+    assert lazy.shape == (17, 17, 17) and lazy.flags.writeable and np.array_equal(lazy, full)
+    assert np.array_equal(n.noise2(x[:, :, 0], y[:, :, 0]), n.noise2(*np.broadcast_arrays(x[:, :, 0], y[:, :, 0])))
