@@ -526,8 +526,9 @@ def coupling_pairs(points: AddedPoints, fluid: np.ndarray, grid: Grid, solid_mas
     else:
         ok &= fluid.ravel()[flat]
     p_idx, c_idx = ok.T.nonzero()  # point by point
-    g = flat[c_idx, p_idx]
-    w = 1.0 - dist[c_idx, p_idx]
+    pair = c_idx * m + p_idx
+    g = flat.ravel().take(pair)
+    w = 1.0 - dist.ravel().take(pair)
     if m <= _DENSE_PAIRS:
         du, dv = u[:, None] - u[None, :], v[:, None] - v[None, :]
         dd = np.sqrt(du * du + dv * dv)

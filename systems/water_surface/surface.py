@@ -59,9 +59,9 @@ def plane_levels(z: F64, solid: np.ndarray, bodies: Bodies, grid: Grid) -> F64:
         return levels
     count = size[:, 0] * size[:, 1]  # many: every window vertex at once, summed per body
     body, offset = ranges(np.zeros(len(bodies), np.int64), count)
-    dv, du = np.divmod(offset, size[body, 0])
-    flat = (lo[body, 1] + dv) * grid.nx + lo[body, 0] + du
-    height, water = z.ravel()[flat], ~solid.ravel()[flat]
+    dv, du = np.divmod(offset, size[:, 0].take(body))
+    flat = (lo[:, 1].take(body) + dv) * grid.nx + lo[:, 0].take(body) + du
+    height, water = z.ravel().take(flat), ~solid.ravel().take(flat)
     n_water = np.bincount(body, water, len(bodies))
     wet = np.bincount(body, np.where(water, height, 0.0), len(bodies)) / np.maximum(n_water, 1)
     every = np.bincount(body, height, len(bodies)) / np.maximum(count, 1)
