@@ -70,6 +70,7 @@ class Camera:
     pitch: float = 0.0
     distance: float = 20.0
     target: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    placed: tuple | None = field(default=None, repr=False, metadata={"hash": False})  # last _place: a cache
 
 
 def build_camera(cfg: CameraConfig, ctx) -> Camera:
@@ -81,14 +82,21 @@ def build_camera(cfg: CameraConfig, ctx) -> Camera:
 
 
 def _place(cam: Camera, t: Transform) -> None:
-    """Set the transform of an orbit / top camera from its angles (float64 trig: deterministic)."""
+    """Set the transform of an orbit / top camera from its angles (float64 trig: deterministic).  Skipped when
+    neither the angles, distance and target nor the transform changed since the last placement (most ticks)."""
+    key = (cam.config.controller, cam.yaw, cam.pitch, cam.distance, tuple(cam.target))
+    last = cam.placed
+    if (last is not None and last[0] == key and np.array_equal(t.position, last[1])
+            and np.array_equal(t.rotation, last[2])):
+        return
     if cam.config.controller == "top":
         t.rotation = quat_from_euler(0.0, -math.pi / 2, 0.0)
         t.position = cam.target + np.array([0.0, cam.distance, 0.0])
-        return
-    t.rotation = quat_from_euler(math.radians(cam.yaw), math.radians(cam.pitch), 0.0)
-    back = quat_rotate(t.rotation, np.array([0.0, 0.0, 1.0]))
-    t.position = cam.target + back * cam.distance
+    else:
+        t.rotation = quat_from_euler(math.radians(cam.yaw), math.radians(cam.pitch), 0.0)
+        back = quat_rotate(t.rotation, np.array([0.0, 0.0, 1.0]))
+        t.position = cam.target + back * cam.distance
+    cam.placed = (key, np.array(t.position, copy=True), np.array(t.rotation, copy=True))
 
 
 def _inside(rect, point) -> bool:
