@@ -180,10 +180,9 @@ def _update_wind(cfg: DustDevilConfig, state: DustDevilState) -> WindField:
 def _velocity(cfg: DustDevilConfig, wind: WindField, size: F64, local: F64, h: float) -> F64:
     """Field-space wind (m/s) a particle moves with over a substep ``h``: the looked-up vector (euler, 2.1), or
     the one looked up at the half-step point (midpoint)."""
-    lookups = len(local) * cfg.substeps * (2 if cfg.integrator == "midpoint" else 1)
-    v = wind.sample(to_unit(local, size), cfg.lookup, lookups)
+    v = wind.sample(to_unit(local, size), cfg.lookup)
     if cfg.integrator == "midpoint":
-        v = wind.sample(to_unit(local + 0.5 * h * v, size), cfg.lookup, lookups)
+        v = wind.sample(to_unit(local + 0.5 * h * v, size), cfg.lookup)
     return v
 
 

@@ -113,10 +113,12 @@ def test_the_field_at_the_particles_nodes_is_the_grid_bit_for_bit():
     assert np.array_equal(got, grid[nodes[:, 0], nodes[:, 1], nodes[:, 2]])  # exact, not close
 
     u = rng.uniform(-0.1, 1.1, (300, 3))
-    few = WindField(resolution, size, 37.5, 1.3, 1.7)
-    v = few.sample(u, "nearest", expected_lookups=600)
-    assert few.evaluated == 300 and few._grid is None  # per point: 300 evaluations, no grid
-    many = WindField(resolution, size, 37.5, 1.3, 1.7)
-    assert np.array_equal(many.sample(u, "nearest", expected_lookups=10_000), v)
-    assert many.evaluated == np.prod(resolution)  # the whole grid once
+    field = WindField(resolution, size, 37.5, 1.3, 1.7)
+    v = field.sample(u, "nearest")
+    needed = np.unique(np.rint(np.clip(u, 0, 1) * (np.array(resolution) - 1)) @ [13 * 11, 11, 1])
+    assert field.evaluated == len(needed) < 300  # each needed grid point once, nothing else
     assert np.array_equal(v, sample_wind(grid, u, "nearest"))
+    assert np.array_equal(field.sample(u, "nearest"), v) and field.evaluated == len(needed)  # known: no work
+    assert np.array_equal(field.sample(u, "trilinear"), sample_wind(grid, u, "trilinear"))
+    assert field.evaluated <= np.prod(resolution)
+    assert np.array_equal(field.grid, grid) and field.evaluated == np.prod(resolution)
