@@ -128,3 +128,20 @@ def test_cross_gives_the_bits_of_np_cross_for_any_broadcast():
         a, b = rng.normal(size=shape_a), rng.normal(size=shape_b)
         assert np.array_equal(cross(a, b), np.cross(a, b))
     assert np.array_equal(cross([1, 0, 0], (0, 1, 0)), [0.0, 0.0, 1.0])
+
+
+def test_single_euler_angles_take_a_fast_path_with_the_array_paths_bits():
+    """Scripts and cameras build one rotation per call; the scalar path must give the bytes of the array path
+    (signed zeros included), or state hashes would depend on how the angles were passed."""
+    from engine.spatial import quat_from_axis_angle, quat_from_euler, quat_mul
+
+    rng = np.random.default_rng(3)
+    cases = [tuple(v) for v in rng.uniform(-10.0, 10.0, (500, 3))] + [(0.0, -0.0, 0.0), (-0.0, -0.0, -0.0),
+                                                                      (np.pi, -np.pi / 2, 0.0)]
+    for yaw, pitch, roll in cases:
+        array = quat_mul(quat_from_axis_angle((0.0, 1.0, 0.0), yaw),
+                         quat_mul(quat_from_axis_angle((1.0, 0.0, 0.0), pitch),
+                                  quat_from_axis_angle((0.0, 0.0, 1.0), roll)))
+        assert quat_from_euler(float(yaw), float(pitch), float(roll)).tobytes() == array.tobytes()
+    stacked = quat_from_euler(np.array([0.1, -0.4]), 0.2, 0.0)  # arrays still broadcast
+    assert stacked.shape == (2, 4) and stacked[1].tobytes() == quat_from_euler(-0.4, 0.2, 0.0).tobytes()
