@@ -120,7 +120,8 @@ class Renderer:
         self.fps = 0.0
         self._last_draw: float | None = None
         self._final: moderngl.Texture | None = None
-        self._held: dict[int, moderngl.Texture] = {}  # camera entity -> kept picture of a view rendered every N frames
+        # camera entity -> (kept picture, frame index and game time it was rendered) of a view rendered every N frames
+        self._held: dict[int, tuple[moderngl.Texture, int, float]] = {}
         self._final_fbo: moderngl.Framebuffer | None = None
         self._resize_final()
         from engine.render.passes import builtin_features
@@ -325,11 +326,14 @@ class Renderer:
 
         graph.add_pass(f"clear.{view.name}", setup, execute)
 
+    HELD_MAX_AGE = 0.25  # seconds of game time a kept picture may lag behind the world
+
     def _plan_held_views(self) -> None:
         """Mark the views rendered every N frames (``Camera.update_interval``): "rendered" into their kept picture
-        this frame, or "shown" (the kept picture again).  A view renders on frames where the frame index is a
-        multiple of N, and whenever its kept picture is missing or of another size (first frame, resize, a
-        viewport change)."""
+        this frame, or "shown" (the kept picture again).  A view renders when N frames have passed since its
+        last picture, when that picture is older than :attr:`HELD_MAX_AGE` of game time (frames far apart:
+        screenshots of a headless run, a machine at a few frames per second), and when it is missing or of
+        another size (first frame, resize, a viewport change)."""
         live = set()
         for view in self.views:
             interval = view.extra.get("interval", 1)
@@ -337,20 +341,24 @@ class Renderer:
                 continue
             key = view.camera_entity
             live.add(key)
-            held = self._held.get(key)
+            tex, frame, when = self._held.get(key, (None, 0, 0.0))
             size = (view.width, view.height)
-            if held is None or held.size != size:
-                if held is not None:
-                    self._free_resource(held)
-                held = self._held[key] = self.ctx.texture(size, 4)
-                held.filter = (moderngl.LINEAR, moderngl.LINEAR)
-                held.repeat_x = held.repeat_y = False
-                view.extra["held"] = "rendered"
+            if tex is None or tex.size != size:
+                if tex is not None:
+                    self._free_resource(tex)
+                tex = self.ctx.texture(size, 4)
+                tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+                tex.repeat_x = tex.repeat_y = False
+                render = True
             else:
-                view.extra["held"] = "rendered" if self.frame_index % interval == 0 else "shown"
-            view.extra["held_texture"] = held
+                render = (self.frame_index - frame >= interval or not 0.0 <= self.time - when <= self.HELD_MAX_AGE)
+            if render:
+                frame, when = self.frame_index, self.time
+            self._held[key] = (tex, frame, when)
+            view.extra["held"] = "rendered" if render else "shown"
+            view.extra["held_texture"] = tex
         for key in [k for k in self._held if k not in live]:  # cameras gone or back to every frame
-            self._free_resource(self._held.pop(key))
+            self._free_resource(self._held.pop(key)[0])
 
     def _declare_present(self, graph, final, view: View, first: bool):
         """Tone-map ``view`` into its rectangle of the window image.
@@ -413,7 +421,7 @@ class Renderer:
     def release(self) -> None:
         for f in self.features:
             f.release()
-        for tex in self._held.values():
+        for tex, _, _ in self._held.values():
             self._free_resource(tex)
         self._held.clear()
         self.graph.pool.clear()

@@ -284,9 +284,17 @@ def test_a_view_with_an_update_interval_renders_every_nth_frame_and_shows_its_la
     assert drawn == [True, False, False, True, False, False, True]
     assert all(np.array_equal(pictures[i], pictures[0]) for i in (1, 2))  # the kept picture, not a blank
     assert not np.array_equal(pictures[3], pictures[0])  # rendered again: the new light shows
+    # frames far apart in game time (screenshots of a headless run): no stale picture
+    terrain.last_triangles.clear()
+    app.step(30)  # 0.5 s
+    app.render_frame()
+    assert "view1" in terrain.last_triangles
     # a new viewport size renders at once, whatever the frame
+    app.step(1)
+    app.render_frame()
     app.world.get(e, Camera).config = cfg.model_copy(update={"viewport": (0.5, 0.5, 0.5, 0.5)})
     terrain.last_triangles.clear()
+    app.step(1)
     app.render_frame()
     assert "view1" in terrain.last_triangles
     renderer.release()
