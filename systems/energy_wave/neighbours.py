@@ -23,6 +23,8 @@ I64 = NDArray[np.int64]
 
 _PRIMES = np.array([73856093, 19349663, 83492791], dtype=np.int64)
 _STEPS = np.array([-1, 0, 1], dtype=np.int64)  # cell offsets along each axis: 3 x 3 x 3 neighbouring cells
+_OFFSETS = np.arange(27, dtype=np.int64)  # the 27 cells around a cell, 9·ix + 3·iy + iz
+_BITS = np.left_shift(1, _OFFSETS)  # their bits in a mask
 _SAME_POINT = 1e-18  # squared distance under which a neighbour counts as "at the same position"
 _GOLDEN = 0.6180339887498949  # low-discrepancy phases of the sampled buckets
 _BLOCK_SLOTS = 16384  # (sample, pair) slots per block: 64 KiB per float64 work array, the block stays in L2
@@ -138,58 +140,101 @@ class SpatialHash:
         same subset), each weighted by the stride, so the sum over the bucket stays an unbiased estimate at
         bounded cost. Otherwise every point is taken with weight 1. A bucket reached twice by one query (a hash
         collision) is scanned once.
+
+        Queries in the same cell reach the same buckets: the buckets are found once per distinct (group, cell)
+        and each query takes its cell's list, less the buckets that only cells beyond its reach map to.
         """
         groups = np.repeat(np.arange(len(sizes)), sizes)  # group of each query
         scaled = query / self.cells[groups, None]
         cells = np.floor(scaled)
-        beyond = _beyond_reach(scaled - cells, np.abs(scaled).max(axis=1))
-        keys = _hash_around(cells.astype(np.int64), (self.tables - 1)[groups])
-        # Sort each query's buckets, those of cells beyond reach last among equal buckets (lowest bit).
-        keys <<= 1
-        keys |= beyond
+        near_bits = _near_bits(scaled - cells, np.abs(scaled).max(axis=1))
+        cell, group, cell_of = _distinct_cells(cells.astype(np.int64), groups)
+        # Each distinct cell's buckets, ascending, each once: (bucket << 5 | offset) sorted along the 27 offsets;
+        # a bucket that several offsets map to keeps the bit mask of all of them.
+        keys = _hash_around(cell, (self.tables - 1)[group])
+        keys <<= 5
+        keys |= _OFFSETS
         keys.sort(axis=1)
-        beyond = (keys & 1).astype(bool)
-        keys >>= 1
-        keys += self.offsets[groups, None]
+        bits = np.left_shift(1, keys & 31)
+        keys >>= 5
+        keys += self.offsets[group, None]
+        first = np.ones(keys.shape, dtype=bool)
+        np.not_equal(keys[:, 1:], keys[:, :-1], out=first[:, 1:])
+        first = np.flatnonzero(first)
+        mask = np.bitwise_or.reduceat(bits.ravel(), first)  # offsets of each distinct (cell, bucket)
+        keys = keys.ravel()[first]
+        owner_cell = first // 27
         counts = self.counts[keys]
-        counts[:, 1:][keys[:, 1:] == keys[:, :-1]] = 0
-        first_query = np.cumsum(sizes) - sizes
         if per_bucket_limit > 0:  # sampled groups: some query of theirs reaches a crowded bucket
-            sampled = np.maximum.reduceat(counts.max(axis=1), first_query) > per_bucket_limit
-            cap = np.where(sampled, per_bucket_limit, np.iinfo(np.int64).max)[groups]
-            taken = np.minimum(counts, cap[:, None])
+            group_first = np.searchsorted(group[owner_cell], np.arange(len(sizes)))
+            sampled = np.maximum.reduceat(counts, group_first) > per_bucket_limit
+            taken = np.minimum(counts, np.where(sampled, per_bucket_limit, np.iinfo(np.int64).max)[group[owner_cell]])
         else:
             taken = counts
-        counts, keys, taken = counts.ravel(), keys.ravel(), taken.ravel()
-        nonempty = np.flatnonzero(taken)
-        owner = nonempty // 27
-        # Phase of a sampled pair: its serial number within its group times the golden ratio, mod 1.
-        phase = np.arange(len(nonempty)) - np.searchsorted(owner, first_query)[groups[owner]]
-        phase = phase * _GOLDEN
-        phase -= np.floor(phase)
+        full = np.flatnonzero(taken)
+        keys, counts, taken, mask, owner_cell = keys[full], counts[full], taken[full], mask[full], owner_cell[full]
+        per_cell = np.bincount(owner_cell, minlength=len(cell))
+        start, stride = self.starts[keys], counts / taken
+        # Every query gets its cell's list: pairs (query, entry), query-major.
+        reached = per_cell[cell_of]
+        query_first = np.cumsum(reached) - reached  # each query's first pair
+        entry = np.repeat((np.cumsum(per_cell) - per_cell)[cell_of] - query_first, reached)
+        entry += np.arange(len(entry))
         # Pairs whose bucket is reached only through cells beyond reach hold no point within reach: dropped
         # after the phases and the sampling were decided, so the result is that of scanning them.
-        near = ~beyond.ravel()[nonempty]
-        nonempty, owner, phase = nonempty[near], owner[near], phase[near]
-        count = counts[nonempty]
-        taken = taken[nonempty]
-        return _Buckets(owner, self.starts[keys[nonempty]], taken, count / taken, phase)
+        near = mask[entry]
+        near &= np.repeat(near_bits, reached)
+        near = np.flatnonzero(near.astype(bool))
+        entry = entry[near]
+        owner = np.repeat(np.arange(len(query)), reached)[near]
+        # Phase of a sampled pair: its serial number within its group (among all its pairs) times the golden
+        # ratio, mod 1.
+        first_query = np.cumsum(sizes) - sizes
+        group_first = query_first[first_query]
+        bounds = np.searchsorted(near, np.append(group_first, query_first[-1] + reached[-1]))
+        phase = near - np.repeat(group_first, np.diff(bounds))
+        phase = phase * _GOLDEN
+        phase -= np.floor(phase)
+        return _Buckets(owner, start[entry], taken[entry], stride[entry], phase)
 
 
-def _beyond_reach(fraction: F64, magnitude: F64) -> NDArray[np.bool_]:
-    """(q, 27) flags of the 3 x 3 x 3 cells around each query (same order as :func:`_hash_around`) whose nearest
-    point is farther than one cell size from the query: ``fraction`` (q, 3) is the query's position in its own
-    cell, in cell units. The margin covers rounding (the query's and the points' cell coordinates); far from the
-    origin (``magnitude``, in cells, beyond 1e9) nothing is flagged."""
-    gaps = []
-    for axis in range(3):  # squared gaps to the cells at offsets -1, 0, +1 along each axis: (3, q)
-        f = fraction[:, axis]
-        gaps.append(np.stack([f * f, np.zeros_like(f), (1.0 - f) * (1.0 - f)]))
-    gx, gy, gz = gaps
-    d2 = gx[:, None, None, :] + gy[None, :, None, :] + gz[None, None, :, :]
-    beyond = d2.reshape(27, len(fraction)) > 1.0 + 1e-6
-    beyond[:, magnitude > 1e9] = False
-    return beyond.T
+def _distinct_cells(cells: I64, groups: I64) -> tuple[I64, I64, I64]:
+    """The distinct (group, cell) of the queries: their cells (u, 3) and groups (u,), ordered by group, and each
+    query's index among them."""
+    lo = cells.min(axis=0)
+    span = cells.max(axis=0) - lo + 1
+    if float(np.prod(span, dtype=np.float64)) * (int(groups[-1]) + 1) < 2.0**62:  # one int64 key per (group, cell)
+        key = (groups * span[0] + (cells[:, 0] - lo[0])) * span[1] + (cells[:, 1] - lo[1])
+        key = key * span[2] + (cells[:, 2] - lo[2])
+        order = np.argsort(key)
+        key = key[order]
+        new = np.ones(len(order), dtype=bool)
+        np.not_equal(key[1:], key[:-1], out=new[1:])
+    else:
+        order = np.lexsort((cells[:, 2], cells[:, 1], cells[:, 0], groups))
+        new = np.ones(len(order), dtype=bool)
+        new[1:] = (groups[order[1:]] != groups[order[:-1]]) | (cells[order[1:]] != cells[order[:-1]]).any(axis=1)
+    cell_of = np.empty(len(order), dtype=np.int64)
+    cell_of[order] = np.cumsum(new) - 1
+    first = order[new]
+    return cells[first], groups[first], cell_of
+
+
+def _near_bits(fraction: F64, magnitude: F64) -> I64:
+    """Per query, a bit mask of the 3 x 3 x 3 cells around it (bit ``9·ix + 3·iy + iz``, the order of
+    :func:`_hash_around`) whose nearest point is within one cell size of the query: ``fraction`` (q, 3) is the
+    query's position in its own cell, in cell units. The margin covers rounding (the query's and the points'
+    cell coordinates); far from the origin (``magnitude``, in cells, beyond 1e9) every cell counts as near."""
+    gaps = np.empty((3, 3, len(fraction)))  # (axis, offset -1 / 0 / +1, query): squared gaps to those cells
+    f = fraction.T
+    np.multiply(f, f, out=gaps[:, 0])
+    gaps[:, 1] = 0.0
+    g = np.subtract(1.0, f, out=gaps[:, 2])
+    g *= g
+    d2 = gaps[0][:, None, None, :] + gaps[1][None, :, None, :] + gaps[2][None, None, :, :]
+    near = d2.reshape(27, len(fraction)) <= 1.0 + 1e-6
+    near[:, magnitude > 1e9] = True
+    return _BITS @ near
 
 
 class _Buckets(NamedTuple):
