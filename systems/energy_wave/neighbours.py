@@ -299,15 +299,6 @@ def neighbour_repulsion(query: F64, points: F64, radius: float, strength: float,
     return grouped_repulsion([(query, points[near], radius, strength)], per_bucket_limit)[0]
 
 
-def _blocks(pairs: I64, taken: I64):
-    """Consecutive blocks of ``pairs`` (sorted by ``taken``, most first) of about _BLOCK_SLOTS samples each."""
-    lo = 0
-    while lo < len(pairs):  # loop over blocks of pairs (bounded work arrays), not over particles
-        hi = lo + max(1, _BLOCK_SLOTS // int(taken[pairs[lo]]))
-        yield pairs[lo: hi]
-        lo = hi
-
-
 def grouped_repulsion(groups: list[tuple[F64, F64, float, float]], per_bucket_limit: int = 0) -> list[F64]:
     """:func:`neighbour_repulsion` of independent groups (query, points, radius, strength) at once, each group's
     ``points`` already restricted to :func:`in_reach` of its queries (the hash table is sized by them): the
@@ -322,32 +313,42 @@ def grouped_repulsion(groups: list[tuple[F64, F64, float, float]], per_bucket_li
     owner, start, taken, stride, phase = grid.buckets(query, sizes, per_bucket_limit)
     if len(owner) == 0:
         return out
-    reach = np.array([groups[g][2] * groups[g][2] for g in live])  # squared radius per group
-    reach = reach[np.repeat(np.arange(len(live)), sizes)][owner]  # ... per pair
-    columns = np.ascontiguousarray(query.T)
-    sums = _WORK.table("sums", 3 * len(owner)).reshape(3, -1)
-    # Sampled pairs (all of per_bucket_limit samples) take their slots from the phase; the others take every
-    # point of their bucket, in blocks of pairs with equal sample counts (fullest first, a stable radix sort).
+    radii = [groups[g][2] for g in live]
+    if all(r == radii[0] for r in radii):
+        reach = radii[0] * radii[0]  # squared radius, shared
+    else:
+        reach = np.array([r * r for r in radii])[np.repeat(np.arange(len(live)), sizes)][owner]  # ... per pair
+    # Pairs in the order they are computed: the sampled ones (all of per_bucket_limit samples, slots from the
+    # phase), then the others, which take every point of their bucket, fullest first (a stable radix sort), so a
+    # block of pairs holds about equal sample counts. Their parameters are laid out in that order once.
     sampled = stride > 1.0
-    for pick in _blocks(np.flatnonzero(sampled), taken):
-        who = owner[pick]
-        block = _WORK.table("block", 3 * len(pick)).reshape(3, -1)
-        _pair_sums(grid.xyz, columns[:, who], start[pick], taken[pick], stride[pick], phase[pick], reach[pick],
-                   block)
-        sums[:, pick] = block
+    order = np.flatnonzero(sampled)
+    split = len(order)
     rest = np.flatnonzero(~sampled)
     if len(rest):
         most = int(taken[rest].max())
         rest = rest[np.argsort((most - taken[rest]).astype(np.uint16) if most < 1 << 16 else -taken[rest],
                                kind="stable")]
-        for pick in _blocks(rest, taken):
-            who = owner[pick]
-            block = _WORK.table("block", 3 * len(pick)).reshape(3, -1)
-            _pair_sums(grid.xyz, columns[:, who], start[pick], taken[pick], stride[pick], None, reach[pick], block)
-            sums[:, pick] = block
+        order = np.concatenate([order, rest])
+    start, taken, stride = start[order], taken[order], stride[order]
+    phase = phase[order[:split]]
+    if not np.isscalar(reach):
+        reach = reach[order]
+    point = _WORK.table("point", 3 * len(order)).reshape(3, -1)
+    np.take(query.T, owner[order], axis=1, out=point)
+    sums = _WORK.table("sums", 3 * len(order)).reshape(3, -1)
+    lo = 0
+    while lo < len(order):  # loop over blocks of pairs (bounded work arrays), not over particles
+        hi = min(lo + max(1, _BLOCK_SLOTS // int(taken[lo])), split if lo < split else len(order))
+        _pair_sums(grid.xyz, point[:, lo:hi], start[lo:hi], taken[lo:hi], stride[lo:hi],
+                   phase[lo:hi] if lo < split else None, reach if np.isscalar(reach) else reach[lo:hi],
+                   sums[:, lo:hi])
+        lo = hi
+    by_pair = _WORK.table("by_pair", 3 * len(order)).reshape(3, -1)
+    by_pair[:, order] = sums
     total = np.empty((len(query), 3))
     for axis in range(3):  # per query, its buckets summed in order
-        total[:, axis] = np.bincount(owner, weights=sums[axis], minlength=len(query))
+        total[:, axis] = np.bincount(owner, weights=by_pair[axis], minlength=len(query))
     bounds = np.cumsum([0] + sizes)
     for i, g in enumerate(live):  # loop over groups
         out[g] = total[bounds[i]: bounds[i + 1]] * groups[g][3]
