@@ -54,8 +54,11 @@ def _table_size(points: int) -> int:
 
 def in_reach(points: F64, query: F64, radius: float, mask: NDArray[np.bool_] | None = None) -> I64:
     """Indices of the ``points`` (where ``mask``) inside the queries' bounding box grown by ``radius``."""
-    lo = query.min(axis=0) - radius
-    hi = query.max(axis=0) + radius
+    return in_box(points, query.min(axis=0) - radius, query.max(axis=0) + radius, mask)
+
+
+def in_box(points: F64, lo: F64, hi: F64, mask: NDArray[np.bool_] | None = None) -> I64:
+    """Indices of the ``points`` (where ``mask``) with lo <= p <= hi on every axis."""
     column = points[:, 0]
     inside = column >= lo[0]
     inside &= column <= hi[0]

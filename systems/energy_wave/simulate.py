@@ -42,12 +42,13 @@ from engine.noise import PerlinNoise
 from engine.spatial import Transform, quat_rotate, quat_to_matrix
 from engine.world import World
 
-from .neighbours import grouped_repulsion, in_reach
+from .neighbours import grouped_repulsion, in_box
 
 F64 = NDArray[np.float64]
 
 NEIGHBOUR_SAMPLE_LIMIT = 16  # per hashed cell: crowded cells are sampled (unbiased) so cost stays bounded
 _EPS = 1e-12
+_SIGN_AND_LOW = np.int8(-127)  # 0b10000001: the sign bit and the lowest bit of an int8 pattern code
 
 
 @dataclass
@@ -194,11 +195,11 @@ def _patterns(u_circular: F64, u_continuous: F64, alpha: F64 | float, beta: F64 
 
 
 def is_circular(pattern: NDArray[np.int8]) -> NDArray[np.bool_]:
-    return (pattern >= 0) & ((pattern & 1) == 0)  # a bit test: int8 % is slow
+    return (pattern & _SIGN_AND_LOW) == 0  # a bit test (int8 % is slow): not negative (BEAM), even
 
 
 def is_irregular(pattern: NDArray[np.int8]) -> NDArray[np.bool_]:
-    return (pattern >= 0) & ((pattern & 1) == 1)
+    return (pattern & _SIGN_AND_LOW) == 1  # not negative, odd
 
 
 def bar_offsets(samples: int, spacing: float) -> F64:
@@ -336,10 +337,10 @@ def _emit(emitters: list[_Emitter], dt: float) -> None:
         return
     counts = np.array([count for _, count in spawning])
     firsts = np.cumsum(counts) - counts
-    axes = [quat_to_matrix(e.transform.rotation) for e, _ in spawning]  # columns: right (+x), up (+y), back (+z)
-    right = np.repeat(np.array([a[:, 0] for a in axes]), counts, axis=0)
-    up = np.repeat(np.array([a[:, 1] for a in axes]), counts, axis=0)
-    forward = np.repeat(np.array([-a[:, 2] for a in axes]), counts, axis=0)
+    axes = quat_to_matrix(np.array([e.transform.rotation for e, _ in spawning]))  # columns: right, up, back (+z)
+    right = np.repeat(axes[:, :, 0], counts, axis=0)
+    up = np.repeat(axes[:, :, 1], counts, axis=0)
+    forward = np.repeat(-axes[:, :, 2], counts, axis=0)
     u_phase, u_radius, u_angle = (np.concatenate(parts) for parts in zip(*draws))
     serial = (np.arange(len(u_phase)) - np.repeat(firsts, counts)).astype(np.float64)
     phase = (serial + u_phase) / np.repeat(counts.astype(np.float64), counts)  # stratified over the step
@@ -403,6 +404,7 @@ class _Splashes:
     circular: NDArray[np.int64]  # which of them move circularly (eqs. 3.2–3.4), ascending
     drag: F64  # D (eq. 3.2) of the circular ones
     neighbours: list[F64]  # per emitter: positions that repel its circular ones (eq. 3.3)
+    incoming: F64  # their beam velocities before the hit
 
 
 def _per_row(values: list[float], counts: NDArray[np.int64]) -> F64:
@@ -479,10 +481,12 @@ def _splash(emitters: list[_Emitter], first: NDArray[np.int64], rows: NDArray[np
         buf = e.state.particles
         own = point[first[i]: first[i + 1]]
         query = point[circ[bounds[i]: bounds[i + 1]]]
-        settled = in_reach(buf.position[: buf.count], query, e.cfg.repulsion_radius, buf.pattern[: buf.count] >= 0)
-        neighbours.append(np.concatenate([buf.position[settled], own[in_reach(own, query, e.cfg.repulsion_radius)]]))
+        lo = query.min(axis=0) - e.cfg.repulsion_radius  # the queries' box grown by the radius (neighbours.in_reach)
+        hi = query.max(axis=0) + e.cfg.repulsion_radius
+        settled = in_box(buf.position[: buf.count], lo, hi, buf.pattern[: buf.count] >= 0)
+        neighbours.append(np.concatenate([buf.position[settled], own[in_box(own, lo, hi)]]))
     slots = np.concatenate([e.beam[rows[first[i]: first[i + 1]]] for i, e in enumerate(emitters)])
-    return _Splashes(first, slots, point, normal, pattern, lifetime, c, control, offset, circ, drag, neighbours)
+    return _Splashes(first, slots, point, normal, pattern, lifetime, c, control, offset, circ, drag, neighbours, w)
 
 
 def _repulsions(emitters: list[_Emitter], splash: _Splashes) -> F64:
@@ -551,10 +555,11 @@ def _send_events(world: World, emitter: int, colliders: list[ColliderEntry], whi
 
 def _steer_irregular(cfg: EnergyWaveEmitter, state: EnergyWaveState, transform: Transform, dt: float) -> None:
     """Irregular particles aim at their control point so that they arrive when τ runs out (eq. 3.5)."""
+    if not cfg.control_points:
+        return
     buf = state.particles
-    n = buf.count
-    irregular = np.flatnonzero(is_irregular(buf.pattern[:n]))
-    if irregular.size == 0 or not cfg.control_points:
+    irregular = np.flatnonzero(is_irregular(buf.pattern[: buf.count]))
+    if irregular.size == 0:
         return
     local = control_point_offsets(cfg, state.time, _noise(state))
     world_offsets = quat_rotate(transform.rotation, local)
@@ -614,20 +619,18 @@ def _collide(world: World, emitters: list[_Emitter]) -> None:
         splash = _splash(flying, first, hit - bounds[owner[hit]], point, result.normal[hit], depth)
         acceleration = _accelerations(splash, _repulsions(flying, splash))
     for i, e in enumerate(flying):  # loop over emitters, in entity order: events in a fixed order
-        incoming = e.state.particles.velocity[e.beam]
         for index, rows, points in result.triggers:
             mine = (rows >= bounds[i]) & (rows < bounds[i + 1])
-            local = rows[mine] - bounds[i]
-            _send_events(world, e.entity, colliders, np.full(local.size, index), points[mine],
-                         -incoming[local] / max(e.cfg.beam_speed, _EPS), incoming[local], e.cfg.particle_mass,
-                         trigger=True)
+            incoming = e.state.particles.velocity[e.beam[rows[mine] - bounds[i]]]
+            _send_events(world, e.entity, colliders, np.full(len(incoming), index), points[mine],
+                         -incoming / max(e.cfg.beam_speed, _EPS), incoming, e.cfg.particle_mass, trigger=True)
         own = slice(int(first[i]), int(first[i + 1]))
         if own.start == own.stop:
             continue
         _land(e.state, splash, acceleration, own)
         rows = hit[own]
         _send_events(world, e.entity, colliders, result.collider[rows], splash.point[own], splash.normal[own],
-                     incoming[rows - bounds[i]], e.cfg.particle_mass)
+                     splash.incoming[own], e.cfg.particle_mass)
 
 
 def _step(world: World, emitters: list[_Emitter], dt: float) -> None:
