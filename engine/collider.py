@@ -37,6 +37,14 @@ def _points(points: ArrayLike, name: str) -> F64:
     return array
 
 
+def _first_max(a: F64, b: F64, c: F64) -> NDArray[np.int64]:
+    """``np.argmax`` over the three columns (the first of equal maxima; no NaNs here), without a reduction over
+    a trailing axis of 3."""
+    axis = (b > a).astype(np.int64)
+    axis[c > np.maximum(a, b)] = 2
+    return axis
+
+
 def _unit(v: F64, fallback: F64) -> F64:
     """Normalize rows of v; rows of zero length become ``fallback``."""
     norm = np.linalg.norm(v, axis=-1, keepdims=True)
@@ -158,9 +166,12 @@ class Collider:
         it is the face axis of the largest q_i with the sign of p along it.
         """
         q = np.abs(p) - h
-        outside = np.linalg.norm(np.maximum(q, 0.0), axis=-1)
-        inside = np.minimum(q.max(axis=-1), 0.0)
-        axis = np.argmax(q, axis=-1)
+        q0, q1, q2 = q[:, 0], q[:, 1], q[:, 2]  # column by column: reductions over a trailing axis of 3 cost more
+        m0, m1, m2 = np.maximum(q0, 0.0), np.maximum(q1, 0.0), np.maximum(q2, 0.0)
+        outside = np.sqrt(m0 * m0 + m1 * m1 + m2 * m2)  # np.linalg.norm's sum, in its order
+        largest = np.maximum(np.maximum(q0, q1), q2)
+        inside = np.minimum(largest, 0.0)
+        axis = _first_max(q0, q1, q2)
         face = np.zeros_like(p)
         rows = np.arange(len(p))
         face[rows, axis] = np.where(p[rows, axis] >= 0.0, 1.0, -1.0)
@@ -178,9 +189,11 @@ class Collider:
         slab_in = np.abs(o) <= h
         t_lo = np.where(parallel, np.where(slab_in, -np.inf, np.inf), np.minimum(t1, t2))
         t_hi = np.where(parallel, np.where(slab_in, np.inf, -np.inf), np.maximum(t1, t2))
-        t_near, t_far = t_lo.max(axis=-1), t_hi.min(axis=-1)
+        a0, a1, a2 = t_lo[:, 0], t_lo[:, 1], t_lo[:, 2]
+        t_near = np.maximum(np.maximum(a0, a1), a2)
+        t_far = np.minimum(np.minimum(t_hi[:, 0], t_hi[:, 1]), t_hi[:, 2])
         hit = (t_near <= t_far) & (t_near >= 0.0) & (t_near <= max_t)
-        axis = np.argmax(t_lo, axis=-1)
+        axis = _first_max(a0, a1, a2)
         rows = np.arange(len(o))
         normal = np.zeros_like(o)
         normal[rows, axis] = np.where(d[rows, axis] > 0.0, -1.0, 1.0)

@@ -190,3 +190,13 @@ def test_constructor_validation():
     c = Collider(shape="sphere", layer="debris", is_trigger=True)
     assert c.layer == "debris" and c.is_trigger
     np.testing.assert_array_equal(Collider().normal, [0, 1, 0])
+
+
+def test_first_max_is_argmax_over_three_columns_ties_included():
+    from engine.collider import _first_max
+
+    rng = np.random.default_rng(2)
+    q = np.round(rng.normal(size=(5000, 3)) * 2) / 2  # many equal values
+    q[:10] = [[1, 1, 1], [0, 1, 1], [1, 0, 1], [1, 1, 0], [-np.inf, -np.inf, -np.inf], [np.inf, 0, np.inf],
+              [-1, -np.inf, -1], [0, 0, 1], [2, 2, 1], [-0.0, 0.0, -0.0]]
+    assert np.array_equal(_first_max(q[:, 0], q[:, 1], q[:, 2]), np.argmax(q, axis=-1))
