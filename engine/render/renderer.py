@@ -346,9 +346,7 @@ class Renderer:
             if tex is None or tex.size != size:
                 if tex is not None:
                     self._free_resource(tex)
-                tex = self.ctx.texture(size, 4)
-                tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
-                tex.repeat_x = tex.repeat_y = False
+                tex = self._make_resource(TextureDesc(view.width, view.height, "rgba8"))
                 render = True
             else:
                 render = (self.frame_index - frame >= interval or not 0.0 <= self.time - when <= self.HELD_MAX_AGE)
