@@ -17,7 +17,6 @@ import numpy as np
 from engine.builtin import Terrain
 from engine.render.components import Hud, MeshConfig
 from engine.render.feature import OPAQUE, OVERLAY, SKY, RenderFeature, View
-from engine.render.graph import TextureDesc
 from engine.render.terrain import TerrainChunks, build_terrain_chunks, draw_ranges, select_levels, shade_texels
 from engine.spatial import Transform, model_matrices
 
@@ -437,7 +436,7 @@ def present_execute(renderer: Renderer, pc, view: View, final_handle, first: boo
 # --------------------------------------------------------------------------- text
 def text_image(lines: list[str], size: int, color=(255, 255, 255), background=(0, 0, 0, 150), pad: int = 6):
     """RGBA PIL image of ``lines`` on a translucent box (Pillow's built-in font)."""
-    from PIL import Image, ImageDraw, ImageFont
+    from PIL import Image, ImageDraw
 
     font = _font(size)
     probe = ImageDraw.Draw(Image.new("RGBA", (1, 1)))

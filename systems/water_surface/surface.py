@@ -195,7 +195,7 @@ def step_water(state: WaterState, cfg: WaterSurface, grid: Grid, bodies: Bodies,
     volume = _water_mean(state.heights, _solid_index(state))
     if cfg.disturbance_rate > 0.0 or state.splashes:
         _disturb(state, cfg, grid, dt, rng)
-    z, zp = state.heights, state.previous
+    z = state.heights
     if len(bodies):
         near = _near(bodies, grid, state, cfg.depth)
         if not all_of(near, axis=None):
