@@ -150,6 +150,8 @@ class FieldGpu:
         self.band_tex: moderngl.Texture | None = None
         self.band_fbo: moderngl.Framebuffer | None = None
         self.band_bakes = 0  # viewer cells whose 12 images were captured
+        self._band_eye: np.ndarray | None = None  # the viewer's last (x, z): the direction it moves in
+        self._band_level: int | None = None  # the eye-height step in use (see _band_key)
         self.band_buf = ctx.buffer(reserve=N_BAND_SIDES * 6 * 5 * 4)
         self._band_content: dict[int, np.ndarray] = {}
         self.draw_calls = 0  # draw calls of the last draw() (bakes excluded)
@@ -328,29 +330,46 @@ class FieldGpu:
 
     # ------------------------------------------------------------------------------------ level 5 (band)
     def _band_key(self, cell: int, eye_y: float) -> tuple[int, int]:
+        """(cell, eye height above the cell in steps of half a plant height).  The step in use is kept until the
+        eye is three quarters of a step away from it (hysteresis: an eye hovering at a step boundary, as a
+        camera following a walker does, would otherwise re-bake the band at every crossing)."""
         ground = float(self.data.placed.cell_centre[cell, 1])
         step = max(0.5 * self.data.plant_height, 1e-6)
-        return cell, int(np.floor((eye_y - ground) / step + 0.5))
+        level = (eye_y - ground) / step
+        last = self._band_level
+        if last is None or abs(level - last) > 0.75:
+            last = self._band_level = int(np.floor(level + 0.5))
+        return cell, last
 
     def ensure_band(self, cell: int, camera: CameraInput, prefetch: int = 1) -> _BandEntry:
-        """The band images of ``cell`` (baked now if missing), and up to ``prefetch`` neighbours baked ahead."""
+        """The band images of ``cell`` (baked now if missing), and up to ``prefetch`` neighbours baked ahead:
+        those the viewer is heading for (ahead of its motion since the last frame, nearest the heading first),
+        so a walk bakes about one cell per cell crossed instead of every neighbour it passes; none while it
+        stands still."""
         key = self._band_key(cell, float(camera.position[1]))
         entry = self.band_entries.get(key)
         if entry is None:
             entry = self._bake_band(key, camera)
         self.band_entries.move_to_end(key)
         placed = self.data.placed
+        eye = np.asarray(camera.position, dtype=np.float64)[[0, 2]]
+        motion = np.zeros(2) if self._band_eye is None else eye - self._band_eye
+        self._band_eye = eye
         col, row = cell % placed.grid_x, cell // placed.grid_x
-        around = [(r * placed.grid_x + c, key[1]) for r in range(row - 1, row + 2) for c in range(col - 1, col + 2)
-                  if 0 <= r < placed.grid_z and 0 <= c < placed.grid_x]
-        for neighbour in around:
+        around = [r * placed.grid_x + c for r in range(row - 1, row + 2) for c in range(col - 1, col + 2)
+                  if 0 <= r < placed.grid_z and 0 <= c < placed.grid_x and (r, c) != (row, col)]
+        offset = placed.cell_centre[around][:, [0, 2]] - placed.cell_centre[cell, [0, 2]]
+        heading = offset @ motion / np.maximum(np.linalg.norm(offset, axis=1), 1e-9)
+        ahead = [(around[i], key[1]) for i in np.argsort(-heading, kind="stable")
+                 if heading[i] > 0.5 * np.linalg.norm(motion)]  # within 60 degrees of the heading
+        for neighbour in ahead:
             if prefetch <= 0:
                 break
             if neighbour in self.band_entries:
                 continue
             full = len(self.band_entries) >= self.cfg.band_cache_cells
-            if full and next(iter(self.band_entries)) in around:
-                break  # never evict the neighbourhood to bake ahead
+            if full and next(iter(self.band_entries)) in ahead:
+                break  # never evict a cell ahead to bake another
             self._bake_band(neighbour, camera)
             self.band_entries.move_to_end(key)
             prefetch -= 1
