@@ -96,6 +96,44 @@ def test_band_is_baked_and_drawn_beyond_the_distance(tmp_path):
         app.renderer = None
 
 
+def test_bands_are_prefetched_ahead_of_the_viewer_and_the_height_step_has_hysteresis(tmp_path):
+    from dataclasses import replace
+
+    app = _app(tmp_path, SMALL + "grid_x = 24\ngrid_z = 24\nband_cache_cells = 9\n",
+               _camera((0.0, 40.0, 0.0), pitch=-3.0))
+    renderer = make_renderer(app, 96, 72)
+    try:
+        app.step(1)
+        app.render_frame()
+        gpu = next(iter(_feature(app).fields.values()))
+        placed = gpu.data.placed
+        cell = int(placed.cell_of(np.array([0.0, 0.0])))
+        base = placed.cell_centre[cell]
+        from systems.grass_field.lod import CameraInput
+
+        def at(x, z, y=None):
+            return CameraInput(position=np.array([x, base[1] + 40.0 if y is None else y, z]),
+                               forward=np.array([1.0, 0.0, 0.0]), fov_x=1.0, width=96)
+
+        gpu.band_entries.clear()
+        gpu._band_eye, gpu._band_level = None, None
+        gpu.ensure_band(cell, at(base[0], base[2]))
+        gpu.ensure_band(cell, at(base[0], base[2]))  # standing still: nothing baked ahead
+        assert [k[0] for k in gpu.band_entries] == [cell]
+        step = float(placed.cell_centre[1, 0] - placed.cell_centre[0, 0])
+        gpu.ensure_band(cell, at(base[0] + 0.1 * step, base[2]))  # moving along +x: the +x neighbour next
+        assert [k[0] for k in gpu.band_entries] == [cell + 1, cell]
+        # the eye bobbing a fifth of a step around a step boundary keeps the step in use: no re-bake
+        bakes, half = gpu.band_bakes, 0.5 * gpu.data.plant_height
+        level = gpu._band_level
+        for dy in (0.2, -0.2, 0.2, -0.2):
+            gpu.ensure_band(cell, at(base[0] + 0.1 * step, base[2], base[1] + (level + 0.5) * half + dy * half))
+        assert gpu.band_bakes == bakes
+    finally:
+        renderer.release()
+        app.renderer = None
+
+
 def test_debug_view_colours_cells_by_level(tmp_path):
     grass = SMALL + "grid_x = 12\ngrid_z = 12\n"
     camera = _camera((0.0, 30.0, 560.0), pitch=-6.0)
