@@ -13,9 +13,11 @@ in vec3 v_pos;
 in vec3 v_normal;
 out vec4 frag;
 const float F0 = 0.02;
-vec3 sky(vec3 dir) {
+// Powers with constant exponents as products (pow is exp2·log2 per pixel on a software rasteriser).
+vec3 sky(vec3 dir) {  // the engine's sky gradient (engine/render/shaders/sky.frag), up^0.625 by square roots
     float up = clamp(dir.y, 0.0, 1.0);
-    vec3 col = mix(sky_horizon, sky_top, pow(up, 0.6));
+    float q = sqrt(sqrt(up));
+    vec3 col = mix(sky_horizon, sky_top, q * q * sqrt(q));
     return mix(col, sky_horizon * 0.55, clamp(-dir.y * 3.0, 0.0, 1.0));
 }
 void main() {
@@ -23,10 +25,13 @@ void main() {
     vec3 v = normalize(camera_pos - v_pos);
     if (dot(n, v) < 0.0) n = normalize(n - 2.0 * dot(n, v) * v);  // seen edge-on: keep the normal facing us
     float cos_v = clamp(dot(n, v), 0.0, 1.0);
-    float fresnel = F0 + (1.0 - F0) * pow(1.0 - cos_v, 5.0);
+    float m = 1.0 - cos_v, m2 = m * m;
+    float fresnel = F0 + (1.0 - F0) * (m2 * m2 * m);  // Schlick: (1 - cos)^5
     vec3 r = reflect(-v, n);
     float glint = max(dot(r, sun_dir), 0.0);
-    vec3 reflected = sky(r) + sun_color * (pow(glint, 400.0) * 8.0 + pow(glint, 40.0) * 0.5);
+    float g2 = glint * glint, g4 = g2 * g2, g8 = g4 * g4, g16 = g8 * g8, g32 = g16 * g16;
+    float g40 = g32 * g8, g80 = g40 * g40, g160 = g80 * g80, g400 = g160 * g160 * g80;  // glint^40, glint^400
+    vec3 reflected = sky(r) + sun_color * (g400 * 8.0 + g40 * 0.5);
     float depth = max(v_pos.y - floor_y, 0.0);
     float path = depth / max(v.y, 0.2) + depth;  // down to the floor and back up
     float absorbed = 1.0 - exp(-path / clarity);
@@ -35,7 +40,7 @@ void main() {
     float light = 0.5 * ambient + 0.9 * max(dot(n, sun_dir), 0.0) * max(sun_color.g, 0.0);
     vec3 body = tint * light * (1.0 + 0.35 * crest);
     vec3 color = (1.0 - fresnel) * absorbed * body + fresnel * reflected
-               + (1.0 - fresnel) * sun_color * pow(glint, 40.0) * 0.15;
+               + (1.0 - fresnel) * sun_color * g40 * 0.15;
     float alpha = clamp(1.0 - (1.0 - fresnel) * (1.0 - absorbed), 0.0, 1.0);
     float f = 1.0 - exp(-length(camera_pos - v_pos) * fog_density);
     color = mix(color, sky_horizon * alpha, clamp(f, 0.0, 1.0));
