@@ -41,6 +41,17 @@ def set_uniforms(prog: moderngl.Program, **values: Any) -> None:
                 member.value = value
 
 
+def display_to_hdr(display: Any, exposure: float) -> np.ndarray:
+    """The HDR colour that the tone map (``display_color.glsl``) turns into ``display`` (sRGB-ish 0..1): the CPU
+    twin of the shader's ``display_to_hdr``, for colours that are constant over a draw (cel bands, outlines),
+    so their fragments need not invert the tone map per pixel.  Returns float32 of ``display``'s shape."""
+    d = np.clip(np.asarray(display, np.float64), 0.0, 1.0)
+    y = np.clip(d ** 2.2, 0.0, 0.99)
+    a, b, c = 2.51 - 2.43 * y, 0.03 - 0.59 * y, -0.14 * y
+    x = (-b + np.sqrt(b * b - 4.0 * a * c)) / (2.0 * a)
+    return (x / max(float(exposure), 1e-4)).astype(np.float32)
+
+
 def lighting_uniforms(renderer: Renderer, view: View) -> dict[str, Any]:
     s = renderer.settings
     return dict(view_proj=view.view_proj.T.copy(), sun_dir=tuple(renderer.sun_direction),

@@ -23,7 +23,7 @@ import numpy as np
 from components.toon_smoke import ToonSmokeState, ToonSmokeVolumeConfig
 from engine.render.feature import OPAQUE, RenderFeature, View
 from engine.render.graph import TextureDesc
-from engine.render.passes import primitive, set_uniforms
+from engine.render.passes import display_to_hdr, primitive, set_uniforms
 from engine.spatial import Transform
 
 SHADERS = Path(__file__).parent / "shaders"
@@ -181,13 +181,16 @@ class ToonSmokeFeature(RenderFeature):
         return gpu
 
     def _ramp(self, key: tuple) -> moderngl.Texture:
-        tex = self._ramps.get(key)
+        """The ramp's texels as the HDR colours that reach the screen as the configured ones (the tone map
+        inverted once per colour here, not per fragment)."""
+        exposure = float(self.renderer.settings.exposure)
+        tex = self._ramps.get((key, exposure))
         if tex is None:
-            texels = ramp_texels(*key)
+            texels = display_to_hdr(ramp_texels(*key), exposure)
             tex = self.ctx.texture((RAMP_TEXELS, 1), 3, texels.tobytes(), dtype="f4")
             tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
             tex.repeat_x = tex.repeat_y = False
-            self._ramps[key] = tex
+            self._ramps[(key, exposure)] = tex
         return tex
 
     def _sphere_vao(self) -> moderngl.VertexArray:
@@ -223,8 +226,7 @@ class ToonSmokeFeature(RenderFeature):
     def _view_uniforms(self, view: View) -> dict:
         return dict(view_proj=view.view_proj.T.copy(), camera_pos=tuple(float(x) for x in view.camera_pos),
                     camera_forward=tuple(float(x) for x in view.camera_forward), ortho=bool(view.ortho),
-                    sun_dir=tuple(float(x) for x in self.renderer.sun_direction),
-                    exposure=float(self.renderer.settings.exposure))
+                    sun_dir=tuple(float(x) for x in self.renderer.sun_direction))
 
     def _draw_surfaces(self, pc, view: View, data: list[VolumeDraw], edges_handle) -> None:
         edges = pc.get(edges_handle)
@@ -250,8 +252,9 @@ class ToonSmokeFeature(RenderFeature):
                 local[:3, :3] *= 2.0 * radius  # the primitive is a unit-diameter sphere
                 local[:3, 3] = centre
                 model = (draw.model.astype(np.float64) @ local).astype(np.float32)
-                set_uniforms(prog, model=model.T.copy(), mode=1, base_color=colour,
-                             object_id=float(2 * draw.index + 2))
+                lit, shade = display_to_hdr([colour, 0.6 * np.asarray(colour)], self.renderer.settings.exposure)
+                set_uniforms(prog, model=model.T.copy(), mode=1, lit_color=tuple(map(float, lit)),
+                             shade_color=tuple(map(float, shade)), object_id=float(2 * draw.index + 2))
                 self._sphere_vao().render(moderngl.TRIANGLES)
 
     def _draw_outline(self, pc, view: View, data: list[VolumeDraw], edges_handle) -> None:
@@ -275,8 +278,7 @@ class ToonSmokeFeature(RenderFeature):
         prog["edges"].value = 0
         prog["widths"].value = widths
         prog["thresholds"].value = thresholds
-        prog["colors"].value = colors
-        set_uniforms(prog, exposure=float(self.renderer.settings.exposure))
+        prog["colors"].value = [tuple(map(float, c)) for c in display_to_hdr(colors, self.renderer.settings.exposure)]
         self._outline_vao.render(moderngl.TRIANGLES, vertices=3)
         fbo.viewport = (0, 0, view.width, view.height)
 

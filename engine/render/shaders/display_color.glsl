@@ -1,5 +1,6 @@
 // The engine's display transform and its inverse, shared by the tone-mapping pass and by effects that
-// want a colour to reach the screen unchanged (cel shading, UI-like colours in the 3D scene).
+// want a colour to reach the screen unchanged (UI-like colours in the 3D scene).  Colours constant over a draw
+// are better inverted on the CPU (engine.render.passes.display_to_hdr, its twin), as the toon smoke does.
 // Forward: exposure, the ACES fit of Narkowicz (2015) y = (2.51x² + 0.03x) / (2.43x² + 0.59x + 0.14),
 // then gamma 1/2.2.  The inverse solves the quadratic for x.
 // The forward gamma runs on every pixel of every frame: y^(1/2.2) is fitted (least squares on [0, 1], exact at

@@ -1,5 +1,4 @@
 #version 330
-#include "display_color.glsl"
 // Outline / silhouette pass (the paper's named future work): a pixel of an object is an outline pixel when a pixel
 // within `width` of it shows another object (or nothing), or a surface farther away by more than `threshold`
 // of its depth (inner contour lines where one lump of smoke overlaps another).  Outlines lie inside the
@@ -7,7 +6,7 @@
 uniform sampler2D edges;
 uniform float widths[16];
 uniform float thresholds[16];
-uniform vec3 colors[16];
+uniform vec3 colors[16];  // HDR: the tone map turns them into the configured outline colours
 out vec4 frag;
 void main() {
     ivec2 size = textureSize(edges, 0);
@@ -29,5 +28,5 @@ void main() {
         }
     }
     if (!outline) discard;
-    frag = vec4(display_to_hdr(colors[volume]), 1.0);
+    frag = vec4(colors[volume], 1.0);
 }

@@ -112,3 +112,16 @@ def test_outline_pass_is_limited_to_the_volumes_screen_rectangle(tmp_path):
     assert screen_rect(view, behind) is None
     renderer.release()
     app.renderer = None
+
+
+def test_cel_colours_reach_the_screen_unchanged_at_any_exposure(tmp_path):
+    """The ramp and outline colours are turned into HDR on the CPU (the tone map inverted once per colour):
+    with the exposure doubled they must still come out as configured."""
+    target_y, distance = CAMERA["paper"]
+    text = scene_text("paper").replace("target = [0.0, 0.2, 0.0]", f"target = [0.0, {target_y}, 0.0]")
+    text = text.replace("distance = 6.5", f"distance = {distance}").replace(
+        'plugins = ["render", "toon_smoke"]', 'plugins = ["render", "toon_smoke"]\n[render]\nexposure = 2.0')
+    pixels = np.asarray(render_app(make_app(tmp_path, text), 160, 120, frames=1, steps_per_frame=STEPS["paper"]))
+    cfg = preset("paper")
+    assert sum(_close(pixels, c).sum() for c in cfg.ramp_colors) > 300
+    assert _close(pixels, cfg.outline_color).sum() > 50
