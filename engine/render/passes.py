@@ -18,7 +18,7 @@ from engine.builtin import Terrain
 from engine.render.components import Hud, MeshConfig
 from engine.render.feature import OPAQUE, OVERLAY, SKY, RenderFeature, View
 from engine.render.terrain import TerrainChunks, build_terrain_chunks, draw_ranges, select_levels, shade_texels
-from engine.spatial import Transform, model_matrices
+from engine.spatial import Transform, cross, model_matrices
 
 if TYPE_CHECKING:
     from engine.render.renderer import Renderer
@@ -83,13 +83,22 @@ class SkyFeature(RenderFeature):
     phase = SKY
     DISC_COS = 0.98  # sun.frag: below this cosine the disc adds < 1e-6
 
+    def __init__(self, renderer: Renderer) -> None:
+        super().__init__(renderer)
+        self._vaos: dict[str, moderngl.VertexArray] = {}
+
+    def release(self) -> None:
+        for vao in self._vaos.values():
+            vao.release()
+        self._vaos.clear()
+
     def add_passes(self, graph, view: View, data) -> None:
         def setup(b):
             view.color = b.write(view.color)
             b.read(view.depth)
 
         def execute(pc):
-            prog = self._program()
+            sky = self._vao("sky")
             fbo = self.renderer.framebuffer(pc.get(view.color), pc.get(view.depth))
             fbo.use()
             fbo.depth_mask = False
@@ -101,28 +110,31 @@ class SkyFeature(RenderFeature):
             ray = dict(inv_view_proj=inv.astype(np.float32).T.copy(), camera_pos=tuple(view.camera_pos),
                        ortho=view.ortho, camera_forward=tuple(view.camera_forward))
             sun = dict(sun_dir=tuple(self.renderer.sun_direction), sun_color=tuple(self.renderer.sun_color))
-            set_uniforms(prog, sky_top=tuple(s.sky_top), sky_horizon=tuple(s.sky_horizon), **ray, **sun)
-            self._vao.render(moderngl.TRIANGLES, vertices=3)
+            set_uniforms(sky.program, sky_top=tuple(s.sky_top), sky_horizon=tuple(s.sky_horizon), **ray, **sun)
+            sky.render(moderngl.TRIANGLES, vertices=3)
             rect = sun_rect(view, self.renderer.sun_direction, self.DISC_COS)
             if rect is not None:
                 self.ctx.enable(moderngl.BLEND)
                 self.ctx.blend_func = moderngl.ONE, moderngl.ONE
-                set_uniforms(self._sun.program, rect=rect, **ray, **sun)
-                self._sun.render(moderngl.TRIANGLE_STRIP, vertices=4)
+                disc = self._vao("sun")
+                set_uniforms(disc.program, rect=rect, **ray, **sun)
+                disc.render(moderngl.TRIANGLE_STRIP, vertices=4)
                 self.ctx.disable(moderngl.BLEND)
             self.ctx.depth_func = "<"
             fbo.depth_mask = True
 
         graph.add_pass(f"sky.{view.name}", setup, execute)
 
-    def _program(self) -> moderngl.Program:
-        if not hasattr(self, "_vao"):
-            prog = self.renderer.program((SHADERS / "sky.vert").read_text(), (SHADERS / "sky.frag").read_text())
-            self._vao = self.ctx.vertex_array(prog, [])
-            self._prog = prog
-            sun = self.renderer.program((SHADERS / "sun.vert").read_text(), (SHADERS / "sun.frag").read_text())
-            self._sun = self.ctx.vertex_array(sun, [])
-        return self._prog
+    def _vao(self, name: str) -> moderngl.VertexArray:
+        """A buffer-less VAO over ``shaders/<name>``, remade when F5 reloaded the program."""
+        prog = self.renderer.load_program(SHADERS, name)
+        vaos = self._vaos
+        vao = vaos.get(name)
+        if vao is None or vao.program is not prog:
+            if vao is not None:
+                vao.release()
+            vao = vaos[name] = self.ctx.vertex_array(prog, [])
+        return vao
 
 
 def sun_rect(view: View, sun_dir: np.ndarray, min_cos: float) -> tuple[float, float, float, float] | None:
@@ -138,9 +150,9 @@ def sun_rect(view: View, sun_dir: np.ndarray, min_cos: float) -> tuple[float, fl
     if view.ortho:
         return (-1.0, -1.0, 1.0, 1.0) if float(np.dot(view.camera_forward, d)) > min_cos else None
     half = float(np.tan(np.arccos(min_cos)))
-    a = np.cross(d, [0.0, 1.0, 0.0] if abs(d[1]) < 0.9 else [1.0, 0.0, 0.0])
+    a = cross(d, [0.0, 1.0, 0.0] if abs(d[1]) < 0.9 else [1.0, 0.0, 0.0])
     a /= np.linalg.norm(a)
-    b = np.cross(d, a)
+    b = cross(d, a)
     corners = np.array([d + half * (sa * a + sb * b) for sa in (-1, 1) for sb in (-1, 1)])
     clip = np.concatenate([corners, np.zeros((4, 1))], axis=1) @ np.asarray(view.view_proj, np.float64).T
     front = clip[:, 3] > 1e-6

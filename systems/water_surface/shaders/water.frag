@@ -1,5 +1,6 @@
 #version 330
 #include "lit.glsl"
+#include "sky_gradient.glsl"
 // Water: sky reflection weighted by Schlick's Fresnel term (F0 = 0.02, water's index 1.33) with a sun glint, over
 // a body colour tinted from shallow to deep by the light's path through the water down to the pool floor
 // (Beer-Lambert: 1 - exp(-path / clarity)) and lit by the height field's normal; crests scatter a little more
@@ -14,12 +15,6 @@ in vec3 v_normal;
 out vec4 frag;
 const float F0 = 0.02;
 // Powers with constant exponents as products (pow is exp2·log2 per pixel on a software rasteriser).
-vec3 sky(vec3 dir) {  // the engine's sky gradient (engine/render/shaders/sky.frag), up^0.625 by square roots
-    float up = clamp(dir.y, 0.0, 1.0);
-    float q = sqrt(sqrt(up));
-    vec3 col = mix(sky_horizon, sky_top, q * q * sqrt(q));
-    return mix(col, sky_horizon * 0.55, clamp(-dir.y * 3.0, 0.0, 1.0));
-}
 void main() {
     vec3 n = normalize(v_normal);
     vec3 v = normalize(camera_pos - v_pos);
@@ -31,7 +26,7 @@ void main() {
     float glint = max(dot(r, sun_dir), 0.0);
     float g2 = glint * glint, g4 = g2 * g2, g8 = g4 * g4, g16 = g8 * g8, g32 = g16 * g16;
     float g40 = g32 * g8, g80 = g40 * g40, g160 = g80 * g80, g400 = g160 * g160 * g80;  // glint^40, glint^400
-    vec3 reflected = sky(r) + sun_color * (g400 * 8.0 + g40 * 0.5);
+    vec3 reflected = sky_gradient(r, sky_top, sky_horizon) + sun_color * (g400 * 8.0 + g40 * 0.5);
     float depth = max(v_pos.y - floor_y, 0.0);
     float path = depth / max(v.y, 0.2) + depth;  // down to the floor and back up
     float absorbed = 1.0 - exp(-path / clarity);
