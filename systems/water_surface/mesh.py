@@ -8,6 +8,17 @@ conforming mesh (no T-junctions: each square edge carries the same added points 
 every outline segment as an edge, for any number of added points per square (the paper's cases of 2, 3 and 4
 points are special cases). A body whose whole outline lies inside one square becomes a hole, joined to the
 square's corner by a bridge edge before ear clipping.
+
+Cheap paths (the same correctness argument for both): a face is triangulated as a fan from the first of its
+vertices whose fan triangles are all strictly counter-clockwise, and only faces with no such vertex (rare concave
+water-side faces) are ear-clipped. And when the outline's combinatorics did not change since the previous frame
+(same points, kinds, segments, squares and grid lines) the previous triangles are kept if they are all still
+strictly counter-clockwise. Why that suffices: the triangles of a fan (or any triangulation) of a closed polygon
+have that polygon as their boundary chain, so the number of triangles covering a point (counted with orientation)
+is the polygon's winding number about it: 1 inside the face, 0 outside and in a hole. When every triangle is
+positively oriented this count is the plain number of triangles covering the point, so they tile the face exactly:
+no overlap, no gap, no vertex on another triangle's edge (two triangles sharing a corner and a collinear edge on
+the same side would overlap near that corner).
 """
 
 from __future__ import annotations
@@ -17,18 +28,22 @@ from functools import lru_cache
 
 import numpy as np
 
-from systems.water_surface.geometry import F64, I64, Grid, bilinear_with_slope
+from systems.water_surface.geometry import F64, I64, Grid, all_of, any_of, bilinear_with_slope
 
 __all__ = ["WaterMesh", "base_triangles", "retriangulate", "vertex_arrays", "wire_arrays"]
+
+
+_EPS_AREA = 1e-12  # grid units²: a triangle's doubled signed area must exceed this to count as counter-clockwise
 
 
 @dataclass
 class WaterMesh:
     """Triangles over the vertices [grid vertices (nx·nz, row-major j·nx + i), added points (M)]."""
 
-    triangles: I64  # (T, 3)
+    triangles: I64  # (T, 3): the untouched squares' base triangles, then the re-triangulated squares' triangles
     cells: I64  # squares that were re-triangulated (j·(nx − 1) + i)
     outline: I64  # (K, 2) outline segments as vertex ids
+    key: bytes = b""  # the outline's combinatorics this mesh was built for (see ``retriangulate``'s ``previous``)
 
 
 def base_triangles(nx: int, nz: int, cells: I64 | None = None) -> I64:
@@ -48,20 +63,62 @@ def _all_base(nx: int, nz: int) -> I64:
     return tris
 
 
-def retriangulate(nx: int, nz: int, uv: F64, kind: np.ndarray, segments: I64) -> WaterMesh:
-    """The water mesh with the squares crossed by the outline re-triangulated (section 2.2.4)."""
+def retriangulate(nx: int, nz: int, uv: F64, kind: np.ndarray, segments: I64,
+                  previous: WaterMesh | None = None) -> WaterMesh:
+    """The water mesh with the squares crossed by the outline re-triangulated (section 2.2.4).
+
+    ``previous``: the mesh of the same surface at the last frame. Its triangles are reused when the added points
+    still have the same kinds, squares and grid lines, the same outline segments, and every re-triangulated
+    triangle is still strictly counter-clockwise at the new positions (a valid triangulation, see the module
+    docstring); otherwise the crossed squares are triangulated afresh.
+    """
     g = nx * nz
     if len(segments) == 0:
         return WaterMesh(_all_base(nx, nz).reshape(-1, 3), np.zeros(0, np.int64), np.zeros((0, 2), np.int64))
     cell_of = _segment_cells(nx, nz, uv, segments)
+    key = _outline_key(nx, nz, uv, kind, segments, cell_of)
+    if previous is not None and previous.key == key:
+        cut = previous.triangles[len(previous.triangles) - _cut_count(nx, nz, previous):]
+        if _all_counter_clockwise(nx, nz, uv, cut):
+            return WaterMesh(previous.triangles, previous.cells, previous.outline, key)
     cells, local = np.unique(cell_of, return_inverse=True)
     faces, positions, lengths = _faces(nx, uv, kind, segments, cells, local)
-    triangles = _ear_clip(faces, positions, lengths)
+    triangles = _triangulate(faces, positions, lengths)
     triangles = np.where(triangles < 0, g - 1 - triangles, triangles)  # added point p → vertex g + p
     keep = np.ones((nx - 1) * (nz - 1), bool)
     keep[cells] = False
     regular = _all_base(nx, nz)[keep].reshape(-1, 3)
-    return WaterMesh(np.concatenate([regular, triangles]), cells, segments + g)
+    return WaterMesh(np.concatenate([regular, triangles]), cells, segments + g, key)
+
+
+def _outline_key(nx: int, nz: int, uv: F64, kind: np.ndarray, segments: I64, cell_of: I64) -> bytes:
+    """The outline's combinatorics: point kinds, outline segments, their squares, the grid cell or line of each point
+    (a crossing on the line u = i keeps (i, ⌊v⌋), one on v = j keeps (⌊u⌋, j), a vertex L' keeps (⌊u⌋, ⌊v⌋))."""
+    on_line = np.zeros((len(uv), 2))
+    on_line[kind == 0, 0] = 0.5
+    on_line[kind == 1, 1] = 0.5
+    lines = np.floor(uv + on_line).astype(np.int64)
+    return b"".join((np.array([nx, nz]).tobytes(), kind.tobytes(), segments.tobytes(), cell_of.tobytes(), lines.tobytes()))
+
+
+def _cut_count(nx: int, nz: int, mesh: WaterMesh) -> int:
+    """How many of the mesh's triangles (at its end) belong to the re-triangulated squares."""
+    return len(mesh.triangles) - 2 * ((nx - 1) * (nz - 1) - len(mesh.cells))
+
+
+@lru_cache(maxsize=8)
+def _grid_uv(nx: int, nz: int) -> F64:
+    uv = np.stack(np.meshgrid(np.arange(nx, dtype=np.float64), np.arange(nz, dtype=np.float64)), -1).reshape(-1, 2)
+    uv.setflags(write=False)
+    return uv
+
+
+def _all_counter_clockwise(nx: int, nz: int, uv: F64, triangles: I64) -> bool:
+    """Whether every triangle (mesh vertex ids) is strictly counter-clockwise in (u, v)."""
+    every = np.concatenate([_grid_uv(nx, nz), uv])
+    u, v = every[:, 0].take(triangles), every[:, 1].take(triangles)
+    du, dv = u[:, 1:] - u[:, :1], v[:, 1:] - v[:, :1]
+    return bool(all_of(du[:, 0] * dv[:, 1] - dv[:, 0] * du[:, 1] > _EPS_AREA, axis=None))
 
 
 def vertex_arrays(grid: Grid, heights: F64, point_uv: F64, point_heights: F64) -> tuple[F64, F64]:
@@ -236,6 +293,41 @@ def _walk(head: I64, nxt: I64, nx: int, uv: F64):
     pts = uv[np.clip(-1 - faces, 0, max(len(uv) - 1, 0))] if len(uv) else grid_uv
     positions = np.where((faces < 0)[..., None], pts, grid_uv)
     return faces, positions, lengths
+
+
+def _triangulate(faces: I64, positions: F64, lengths: I64) -> I64:
+    """Triangulate simple counter-clockwise polygons (padded): a fan from the first vertex that makes every fan
+    triangle strictly counter-clockwise (a valid triangulation, see the module docstring), ear clipping for the
+    faces that have no such vertex. Negative ids (added points) are passed through."""
+    f, width = faces.shape
+    if width < 3:
+        return np.zeros((0, 3), np.int64)
+    # fan from start s: triangles (s, s + t, s + t + 1) for t = 1 .. length − 2, indices modulo the face length
+    s = np.arange(width)[None, :, None]
+    t = np.arange(1, width - 1)[None, None, :]
+    n = lengths[:, None, None]
+    row = (np.arange(f) * width)[:, None, None]
+    i1 = row + (s + t) % n
+    i2 = row + (s + t + 1) % n
+    x, y = np.ascontiguousarray(positions[..., 0]), np.ascontiguousarray(positions[..., 1])
+    x0, y0 = x[:, :, None], y[:, :, None]
+    x1, y1 = x.take(i1) - x0, y.take(i1) - y0
+    x2, y2 = x.take(i2) - x0, y.take(i2) - y0
+    used = t < n - 1  # fan triangle t exists
+    good = all_of((x1 * y2 - y1 * x2 > _EPS_AREA) | ~used, axis=2) & (s[..., 0] < lengths[:, None])
+    fan = any_of(good, axis=1)
+    rows = np.flatnonzero(fan)
+    start = good.argmax(axis=1).take(rows)[:, None]
+    n = lengths.take(rows)[:, None]
+    t = t[0, 0][None, :]
+    row = (rows * width)[:, None]
+    flat = faces.ravel()
+    tris = np.stack([np.broadcast_to(flat.take(row + start), (len(rows), width - 2)),
+                     flat.take(row + (start + t) % n), flat.take(row + (start + t + 1) % n)], -1)[t < n - 1]
+    if fan.all():
+        return tris
+    rest = np.flatnonzero(~fan)
+    return np.concatenate([tris, _ear_clip(faces[rest], positions[rest], lengths[rest])])
 
 
 def _ear_clip(faces: I64, positions: F64, lengths: I64) -> I64:

@@ -44,13 +44,16 @@ class WaterFeature(RenderFeature):
     def __init__(self, renderer) -> None:
         super().__init__(renderer)
         self._buffers: dict[int, _Buffers] = {}
+        self._meshes: dict[int, Any] = {}  # each surface's last mesh, reused while its outline keeps its shape
 
     def extract(self, world) -> list[dict[str, Any]]:
         out = []
+        meshes, self._meshes = self._meshes, {}
         for entity, (t, cfg, state) in world.query(Transform, WaterSurface, WaterState):
             grid = water_grid(cfg, state, t)
             nz, nx = state.heights.shape
-            mesh = retriangulate(nx, nz, state.point_uv, state.point_kind, state.segments)
+            mesh = retriangulate(nx, nz, state.point_uv, state.point_kind, state.segments, meshes.get(entity))
+            self._meshes[entity] = mesh
             positions, normals = vertex_arrays(grid, state.heights, state.point_uv, state.point_heights)
             item = dict(entity=entity,
                         vertices=np.concatenate([positions, normals], axis=1).astype(np.float32),
@@ -126,3 +129,4 @@ class WaterFeature(RenderFeature):
         for buf in self._buffers.values():
             buf.release()
         self._buffers.clear()
+        self._meshes.clear()

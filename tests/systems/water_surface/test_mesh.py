@@ -7,11 +7,13 @@ import numpy as np
 import pytest
 
 from systems.water_surface.geometry import Bodies
-from systems.water_surface.mesh import base_triangles, retriangulate, vertex_arrays, wire_arrays
+import systems.water_surface.mesh as mesh_module
+from systems.water_surface.mesh import WaterMesh, base_triangles, retriangulate, vertex_arrays, wire_arrays
 from systems.water_surface.outline import added_points, cross_sections, nudge
 from tests.systems.water_surface.helpers import box, make_grid, sphere
 
 GRID = make_grid(26, 0.4)
+ear_clip = mesh_module._ear_clip
 
 
 def _mesh(bodies, segments=16):
@@ -37,7 +39,30 @@ def _check_conforming(pts, mesh):
     assert np.all(count[border] == 1) and np.all(count[~border] == 2)
     known = {tuple(e) for e in unique.tolist()}
     assert all(tuple(sorted(s)) in known for s in mesh.outline.tolist())
+    _check_cells(uv, mesh)
     return area
+
+
+def _check_cells(uv, mesh, n=26):
+    """Square by square: every triangle strictly counter-clockwise and inside one square, the triangles of each
+    square adding up to exactly its area (an overlap adds area, a hole removes it), every outline segment an edge of
+    a triangle of its own square."""
+    t = mesh.triangles
+    a, b, c = uv[t[:, 0]], uv[t[:, 1]], uv[t[:, 2]]
+    area = 0.5 * ((b - a)[:, 0] * (c - a)[:, 1] - (b - a)[:, 1] * (c - a)[:, 0])
+    assert np.all(area > 0.0)
+    square = np.floor((a + b + c) / 3.0).astype(np.int64)
+    low, high = np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c)
+    assert np.all(low >= square - 1e-12) and np.all(high <= square + 1 + 1e-12)
+    cell = square[:, 1] * (n - 1) + square[:, 0]
+    assert np.allclose(np.bincount(cell, area, (n - 1) ** 2), 1.0, rtol=0.0, atol=1e-12)
+    edges = np.sort(np.stack([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]], 1), axis=2)
+    by_cell = {}
+    for k, tri_edges in zip(cell.tolist(), edges.tolist()):
+        by_cell.setdefault(k, set()).update(map(tuple, tri_edges))
+    for s in mesh.outline.tolist():
+        mid = np.floor(0.5 * (uv[s[0]] + uv[s[1]])).astype(np.int64)
+        assert tuple(sorted(s)) in by_cell[int(mid[1] * (n - 1) + mid[0])], f"outline segment {s} not in the mesh"
 
 
 def test_without_bodies_each_square_is_the_base_models_two_triangles():
@@ -97,3 +122,49 @@ def test_vertex_and_wire_arrays():
     assert normals[13 * 26 + 12, 0] < 0.0 and normals[0, 0] == 0.0
     wire = wire_arrays(positions, mesh)
     assert wire.shape == (2 * (3 * len(mesh.triangles) + len(mesh.outline)), 6)
+
+
+def test_the_checks_catch_a_missing_outline_segment_an_overlap_and_a_hole():
+    pts, mesh = _mesh(box(0.1, 0.2, yaw=0.3))
+    uv = np.concatenate([np.stack(np.meshgrid(np.arange(26.0), np.arange(26.0)), -1).reshape(-1, 2), pts.uv])
+    _check_cells(uv, mesh)
+    last = len(mesh.triangles) - 1  # a triangle of a re-triangulated square
+    for triangles in (np.delete(mesh.triangles, last, axis=0), np.concatenate([mesh.triangles, mesh.triangles[last:]])):
+        with pytest.raises(AssertionError):  # a hole, an overlap
+            _check_cells(uv, WaterMesh(triangles, mesh.cells, mesh.outline))
+    plain = base_triangles(26, 26)  # tiles every square, but without the outline
+    with pytest.raises(AssertionError, match="not in the mesh"):
+        _check_cells(uv, WaterMesh(plain, mesh.cells, mesh.outline))
+
+
+def test_a_face_no_vertex_of_which_sees_the_others_is_ear_clipped(monkeypatch):
+    """Two notches from opposite sides (an S): no fan is valid, the face goes to the ear clipper."""
+    calls = []
+    monkeypatch.setattr(mesh_module, "_ear_clip", lambda *a: calls.append(a) or ear_clip(*a))
+    ring = np.array([[0, 0], [0.25, 0], [0.3, 0.9], [0.35, 0], [1, 0], [1, 1], [0.75, 1], [0.7, 0.1], [0.65, 1],
+                     [0, 1]], float)
+    tris = mesh_module._triangulate(-1 - np.arange(10)[None, :], ring[None], np.array([10]))
+    p = ring[-1 - tris]
+    area = 0.5 * ((p[:, 1] - p[:, 0])[:, 0] * (p[:, 2] - p[:, 0])[:, 1]
+                  - (p[:, 1] - p[:, 0])[:, 1] * (p[:, 2] - p[:, 0])[:, 0])
+    assert len(calls) == 1 and len(tris) == 8
+    assert np.all(area > 0) and np.isclose(area.sum(), 1.0 - 2 * 0.5 * 0.1 * 0.9)
+
+
+def test_the_previous_mesh_is_reused_only_while_it_stays_valid():
+    pts, mesh = _mesh(box(0.1, 0.2, yaw=0.3))
+    for du, reused in ((1e-3, True), (0.37, False)):  # a nudge keeps the combinatorics; a longer move does not
+        moved = box(0.1 + 0.4 * du, 0.2, yaw=0.3)
+        s = nudge(cross_sections(moved, np.zeros(1), GRID, 16))
+        p2, _ = added_points(s, moved.entities, GRID)
+        again = retriangulate(26, 26, p2.uv, p2.kind, p2.segments, mesh)
+        assert (again.triangles is mesh.triangles) == reused
+        _check_conforming(p2, again)
+    # same combinatorics, but a kept triangle is no longer counter-clockwise: the squares are triangulated afresh
+    cut = len(mesh.triangles) - 1
+    turned = mesh.triangles.copy()
+    turned[cut] = turned[cut, ::-1]
+    stale = WaterMesh(turned, mesh.cells, mesh.outline, mesh.key)
+    fresh = retriangulate(26, 26, pts.uv, pts.kind, pts.segments, stale)
+    assert fresh.triangles is not turned and fresh.key == mesh.key
+    _check_conforming(pts, fresh)
