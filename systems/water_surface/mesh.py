@@ -161,84 +161,67 @@ def _segment_cells(nx: int, nz: int, uv: F64, segments: I64) -> I64:
 
 
 def _faces(nx: int, uv: F64, kind: np.ndarray, segments: I64, cells: I64, local: I64):
-    """Faces of every crossed square as padded vertex-id and position arrays, counter-clockwise."""
+    """Faces of every crossed square as padded vertex-id and position arrays, counter-clockwise.
+
+    Half-edges: the ring of every square (its corners and the crossings on its sides, counter-clockwise) at
+    [0, r), each outline segment forwards at r + s and backwards at r + k + s. A ring half-edge that reaches a
+    crossing leaves along the outline segment that starts or ends there in that square; an outline half-edge that
+    reaches a crossing continues along the ring, one that reaches a vertex L' along the outline."""
     c = len(cells)
     k = len(segments)
     m = len(uv)
     cj, ci = np.divmod(cells, nx - 1)
-    # Ring entries: the 4 corners of every crossed square, then the crossings that end its outline segments.
-    corner_uv = np.stack([ci, cj], -1)[:, None, :] + np.array([[0, 0], [1, 0], [1, 1], [0, 1]])[None]
-    ring_cell = [np.repeat(np.arange(c), 4)]
-    ring_s = [np.tile(np.arange(4.0), c)]
-    ring_vertex = [(corner_uv[..., 1] * nx + corner_uv[..., 0]).ravel()]  # grid vertex ids
-    ends = np.concatenate([segments[:, 0], segments[:, 1]])
-    end_cell = np.concatenate([local, local])
-    crossing = kind[ends] < 2
-    e_pt, e_cell = ends[crossing], end_cell[crossing]
-    ring_cell.append(e_cell)
-    ring_s.append(_ring_parameter(uv[e_pt], kind[e_pt], ci[e_cell], cj[e_cell]))
-    ring_vertex.append(-1 - e_pt)  # added points as negative ids until the end
-    ring_cell = np.concatenate(ring_cell)
-    ring_s = np.concatenate(ring_s)
-    ring_vertex = np.concatenate(ring_vertex)
-    order = np.lexsort((ring_s, ring_cell))
-    ring_cell, ring_vertex = ring_cell[order], ring_vertex[order]
-    r = len(ring_cell)
-    start = np.searchsorted(ring_cell, np.arange(c))
-    ring_next = np.arange(1, r + 1)
-    last = np.r_[ring_cell[1:] != ring_cell[:-1], True]
-    ring_next[last] = start[ring_cell[last]]
-    # Half-edges: ring e in [0, r), forward segment s at r + s, backward at r + k + s.
+    ends = segments.T.ravel()  # segment starts, then segment ends
+    crossing = kind.take(ends) < 2
+    q = np.flatnonzero(crossing)  # the ring entries that are crossings, as indices into ``ends``
+    e_pt, e_cell = ends.take(q), local.take(q % k)
+    corner_ids = (cj * nx + ci)[:, None] + np.array([0, 1, nx + 1, nx])
+    ring_cell = np.concatenate([np.repeat(np.arange(c), 4), e_cell])
+    position = np.concatenate([np.tile(np.arange(4.0), c), _ring_parameter(uv, kind, e_pt, ci.take(e_cell),
+                                                                              cj.take(e_cell))])
+    order = (ring_cell * 4.0 + position).argsort()  # by square, then counter-clockwise from its corner (i, j)
+    ring_vertex = np.concatenate([corner_ids.ravel(), -1 - e_pt]).take(order)
+    ring_cell = ring_cell.take(order)
+    r = len(order)
+    where = np.empty(r, np.int64)
+    where[order] = np.arange(r)  # sorted position of each ring entry
+    ring_next = np.arange(1, r + 1)  # the last entry of every square goes back to its first
+    last = np.empty(r, bool)
+    last[:-1] = ring_cell[1:] != ring_cell[:-1]
+    last[-1] = True
+    first = np.flatnonzero(np.r_[True, last[:-1]])
+    ring_next[last] = first
     h = r + 2 * k
-    head = np.concatenate([ring_vertex, -1 - segments[:, 0], -1 - segments[:, 1]])  # vertex each starts at
+    head = np.concatenate([ring_vertex, -1 - ends])  # the vertex each half-edge starts at
     nxt = np.empty(h, np.int64)
-    # lookups keyed by (square, added point)
-    ring_key = ring_cell * (m + 1) + np.where(ring_vertex < 0, -1 - ring_vertex, m)
-    seg_key_a = local * (m + 1) + segments[:, 0]
-    seg_key_b = local * (m + 1) + segments[:, 1]
-    # ring edge ending at a corner: continue along the ring; at a crossing: leave along the outline segment
-    end_entry = ring_next
-    end_vertex = ring_vertex[end_entry]
-    at_corner = end_vertex >= 0
-    nxt[:r][at_corner] = end_entry[at_corner]
-    cross_key = ring_key[end_entry[~at_corner]]
-    fwd = _lookup(seg_key_a, cross_key)
-    bwd = _lookup(seg_key_b, cross_key)
-    nxt[:r][~at_corner] = np.where(fwd >= 0, r + fwd, r + k + bwd)
-    # outline edges: at a crossing turn onto the ring (counter-clockwise), at a vertex L' continue the outline
-    seg_from = -np.ones(m, np.int64)
+    # a ring half-edge ending at a corner continues along the ring; at a crossing it leaves along the outline
+    nxt[:r] = ring_next
+    leave = np.empty(r, np.int64)
+    leave[where[4 * c:]] = r + q  # from segment s's start: forwards (r + s); from its end: backwards (r + k + s)
+    crossing_next = ring_vertex.take(ring_next) < 0
+    nxt[:r][crossing_next] = leave.take(ring_next[crossing_next])
+    # an outline half-edge ending at a crossing turns onto that square's ring, at a vertex L' continues the outline
+    ring_of_end = np.zeros(2 * k, np.int64)
+    ring_of_end[q] = where[4 * c:]
+    seg_from = np.zeros(m, np.int64)
     seg_from[segments[:, 0]] = np.arange(k)
-    seg_to = -np.ones(m, np.int64)
+    seg_to = np.zeros(m, np.int64)
     seg_to[segments[:, 1]] = np.arange(k)
-    b_end, a_end = segments[:, 1], segments[:, 0]
-    ring_sorter = np.argsort(ring_key)
-    f_cross = kind[b_end] < 2
-    nxt[r:r + k] = np.where(f_cross, _lookup(ring_key, seg_key_b, ring_sorter), r + seg_from[b_end])
-    b_cross = kind[a_end] < 2
-    nxt[r + k:] = np.where(b_cross, _lookup(ring_key, seg_key_a, ring_sorter), r + k + seg_to[a_end])
-    head, nxt = _bridge_holes(nx, uv, head, nxt, r, k, segments, cells, local, ring_cell, ring_vertex, ring_next)
-    return _walk(head, nxt, nx, uv)
+    a_end, b_end = segments[:, 0], segments[:, 1]
+    nxt[r:r + k] = np.where(crossing[k:], ring_of_end[k:], r + seg_from.take(b_end))
+    nxt[r + k:] = np.where(crossing[:k], ring_of_end[:k], r + k + seg_to.take(a_end))
+    rep = _cycles(nxt)
+    if any_of(rep[r + k:] >= r + k):  # a backward outline cycle touching no ring: a hole, bridged (rare)
+        head, nxt = _bridge_holes(nx, uv, head, nxt, r, k, segments, cells, local, ring_cell, ring_vertex, ring_next)
+        rep = _cycles(nxt)
+    return _walk(head, nxt, rep, nx, uv)
 
 
-def _ring_parameter(uv: F64, kind: np.ndarray, ci: I64, cj: I64) -> F64:
-    """Position s ∈ [0, 4) of a crossing on its square's boundary, counter-clockwise from corner (i, j)."""
-    du, dv = uv[:, 0] - ci, uv[:, 1] - cj
-    on_u = kind == 0  # on a line u = const: the left (du ≈ 0) or right (du ≈ 1) side
-    left = on_u & (du < 0.5)
-    right = on_u & ~left
-    bottom = ~on_u & (dv < 0.5)
-    return np.select([bottom, right, left], [du, 1.0 + dv, 3.0 + (1.0 - dv)], 2.0 + (1.0 - du))
-
-
-def _lookup(keys: I64, query: I64, sorter: I64 | None = None) -> I64:
-    """Index of each query in ``keys`` (unique), or −1."""
-    if sorter is None:
-        sorter = np.argsort(keys)
-    if len(keys) == 0:
-        return -np.ones(len(query), np.int64)
-    pos = np.minimum(np.searchsorted(keys, query, sorter=sorter), len(keys) - 1)
-    found = sorter[pos]
-    return np.where(keys[found] == query, found, -1)
+def _ring_parameter(uv: F64, kind: np.ndarray, points: I64, ci: I64, cj: I64) -> F64:
+    """Position s ∈ (0, 4) of each crossing on its square's boundary, counter-clockwise from corner (i, j)."""
+    du, dv = uv[:, 0].take(points) - ci, uv[:, 1].take(points) - cj
+    on_u = kind.take(points) == 0  # on a line u = const: the left (du ≈ 0) or right (du ≈ 1) side
+    return np.where(on_u, np.where(du < 0.5, 4.0 - dv, 1.0 + dv), np.where(dv < 0.5, du, 3.0 - du))
 
 
 def _cycles(nxt: I64) -> I64:
@@ -279,10 +262,10 @@ def _bridge_holes(nx, uv, head, nxt, r, k, segments, cells, local, ring_cell, ri
     return np.asarray(head, np.int64), np.asarray(nxt, np.int64)
 
 
-def _walk(head: I64, nxt: I64, nx: int, uv: F64):
-    """Vertex ids and positions of every face (padded), walking each cycle once."""
-    rep = _cycles(nxt)
-    starts, lengths = np.unique(rep, return_counts=True)
+def _walk(head: I64, nxt: I64, rep: I64, nx: int, uv: F64):
+    """Vertex ids and positions of every face (padded), walking each cycle (``rep``: its smallest half-edge) once."""
+    starts = np.flatnonzero(rep == np.arange(len(rep)))
+    lengths = np.bincount(rep, minlength=len(rep)).take(starts)
     longest = int(lengths.max())
     faces = np.zeros((len(starts), longest), np.int64)
     cur = starts.copy()
