@@ -74,6 +74,9 @@ priority = 1
 """ + ONE_VIEW.replace('pitch = -15.0', 'pitch = -15.0\nviewport = [0.5, 0.0, 0.5, 1.0]')
 
 
+SCATTER_STAGE = "auto"  # --scatter-stage
+
+
 def make_app(width: int, height: int, particles: int, cameras: str, extra: str = ""):
     from engine.app import App
 
@@ -95,6 +98,9 @@ def bench_render(label: str, width: int, height: int, particles: int, cameras: s
     app = make_app(width, height, particles, cameras, extra)
     app.step(1)  # emission + prewarm
     renderer = Renderer(app, create_headless_context(), width, height)
+    feature = next(f for f in renderer.features if f.name == "dust_devil")
+    if SCATTER_STAGE == "vertex" and feature.use_scatter(1):
+        feature.compute = False  # A/B: the GL 4.2 vertex-stage scatter on a context that has compute shaders
     for _ in range(3):  # warm up: shader compilation, pool allocation
         app.step(1)
         app.render_frame()
@@ -110,8 +116,7 @@ def bench_render(label: str, width: int, height: int, particles: int, cameras: s
         cpus.append(time.process_time() - c0)
         sims.append(t1 - t0)
     frame = statistics.median(times)
-    feature = next(f for f in renderer.features if f.name == "dust_devil")
-    path = {True: "scatter", False: "slab", None: "-"}[feature.scatter] if "pbvr = false" not in extra else "-"
+    path = feature.path if "pbvr = false" not in extra else "-"
     print(f"  {label:<50s} {1.0 / frame:6.1f} fps   (median frame {1e3 * frame:6.1f} ms, best {1e3 * min(times):6.1f}, "
           f"CPU {1e3 * statistics.median(cpus):6.1f} ms/frame, simulation {1e3 * statistics.median(sims):4.1f} ms; "
           f"PBVR {path})")
@@ -144,7 +149,11 @@ def main() -> int:
     parser.add_argument("--frames", type=int, default=60)
     parser.add_argument("--skip-render", action="store_true")
     parser.add_argument("--passes", action="store_true", help="per-pass CPU times of the one-view workload")
+    parser.add_argument("--scatter-stage", choices=("auto", "vertex"), default="auto",
+                        help="vertex: the PBVR scatter in the vertex stage even where compute shaders run (A/B)")
     args = parser.parse_args()
+    global SCATTER_STAGE
+    SCATTER_STAGE = args.scatter_stage
     import os
 
     print("Dust devil (seeds/004) benchmark; load average at start "

@@ -7,13 +7,17 @@ averaged: colour = colour_sand * n / R + scene * (1 - n / R), n the number of re
 
 Two implementations of the same ensemble (same hashed pseudo-particles, same coverage counts n):
 
-* **scatter** (GL 4.2 image load/store in the vertex stage; chosen when the context compiles it):
+* **scatter** (GL 4.3 compute shaders, else GL 4.2 image load/store in the vertex stage; the first the context
+  compiles, probed once and logged):
   ``pbvr_clear`` zeroes a coverage image of one 32-bit word per pixel (two for R > 32);
-  ``pbvr_accumulate`` is one draw of N x (R x K) vertices with rasterisation off: each pseudo-particle tests the
-  pixels of its point against the view's depth and ORs bit r into their words (shaders/pbvr_scatter.vert);
+  ``pbvr_accumulate`` has each pseudo-particle test the pixels of its point against the view's depth and OR bit r
+  into their words: one compute invocation per real particle, which projects it once and draws its R x K
+  pseudo-particles (shaders/pbvr_scatter.comp), or one draw of N x (R x K) vertices with rasterisation off
+  (shaders/pbvr_scatter.vert);
   ``pbvr_resolve`` counts the bits and composites over the view, inside the screen rectangle the particle cloud
   can reach.  A software rasteriser spends most of a point's cost on setting up and shading its pixel block;
-  here a pseudo-particle costs one vertex-shader invocation.
+  here a pseudo-particle costs a few dozen shader instructions, and a compute dispatch runs on all of the
+  driver's worker threads (llvmpipe runs the vertex stage on the calling thread alone).
 * **slab** (GL 3.3): ``pbvr_clear`` clears an rgba16f accumulation target and a depth buffer;
   ``pbvr_accumulate`` draws the R repeats as points, repeat r at the depth of its own slab, additively blended
   (rgb += colour, a += 1) with the depth test GL_LESS, which counts a pixel once per repeat;
@@ -79,6 +83,19 @@ def extract_devils(world) -> list[DevilFrame]:
 
 GL_R32UI = 0x8236  # the coverage words: an r32f graph texture bound as an r32ui image (the same 32 bits)
 MAX_SCATTER_REPEATS = 64  # two coverage words per pixel
+COMPUTE_GROUP = 64  # invocations per work group of pbvr_scatter.comp
+
+
+def set_compute_uniforms(shader: moderngl.ComputeShader, **values: Any) -> None:
+    """Set the uniforms that the compute shader really uses (the compiler drops unused ones)."""
+    for name, value in values.items():
+        member = shader.get(name, None)
+        if member is None:
+            continue
+        if isinstance(value, np.ndarray):
+            member.write(value.astype(np.float32).tobytes())
+        else:
+            member.value = value
 
 
 def slab_depth(r: int, repeats: int) -> float:
@@ -129,7 +146,9 @@ class DustDevilParticles(RenderFeature):
         self._buffers: dict[int, tuple[moderngl.Buffer, dict[str, moderngl.VertexArray]]] = {}
         self._uploaded: dict[int, int] = {}  # entity -> frame index of the last upload
         self.declared_repeats: dict[tuple[int, str], int] = {}  # (entity, view) -> R of the last declared frame
-        self.scatter: bool | None = None  # the GL 4.2 scatter path; None: probed at the first PBVR frame
+        self.scatter: bool | None = None  # the coverage-word scatter path; None: probed at the first PBVR frame
+        self.compute = False  # the scatter as a compute shader (GL 4.3); else in the vertex stage (GL 4.2)
+        self._computes: dict[int, moderngl.ComputeShader] = {}  # POINT_SIDE -> pbvr_scatter.comp
         self._resolve: dict[str, moderngl.VertexArray] = {}
 
     def extract(self, world) -> list[DevilFrame]:
@@ -139,6 +158,16 @@ class DustDevilParticles(RenderFeature):
     def _vao(self, devil: DevilFrame, program: str, defines: str = "") -> moderngl.VertexArray:
         """The VAO of ``shaders/<program>`` (``defines`` put after its #version line) over the devil's particle
         buffer, uploaded once per frame."""
+        buf = self._particle_buffer(devil)
+        vaos = self._buffers[devil.entity][1]
+        key = program + defines
+        if key not in vaos:
+            prog = self._program(program, defines)
+            vaos[key] = self.ctx.vertex_array(prog, [(buf, "3f", "in_position")])
+        return vaos[key]
+
+    def _particle_buffer(self, devil: DevilFrame) -> moderngl.Buffer:
+        """The devil's world positions (N x 3 float32), uploaded once per frame."""
         nbytes = max(devil.positions.nbytes, 12)
         buf, vaos = self._buffers.get(devil.entity, (None, {}))
         if buf is None or buf.size < nbytes:
@@ -151,13 +180,9 @@ class DustDevilParticles(RenderFeature):
             self._uploaded.pop(devil.entity, None)
         frame = self.renderer.frame_index
         if self._uploaded.get(devil.entity) != frame:
-            buf.write(devil.positions.tobytes())
+            buf.write(devil.positions)
             self._uploaded[devil.entity] = frame
-        key = program + defines
-        if key not in vaos:
-            prog = self._program(program, defines)
-            vaos[key] = self.ctx.vertex_array(prog, [(buf, "3f", "in_position")])
-        return vaos[key]
+        return buf
 
     def _program(self, name: str, defines: str = "") -> moderngl.Program:
         """``shaders/<name>.vert`` + ``.frag`` with ``defines`` after the vertex shader's #version line."""
@@ -178,18 +203,50 @@ class DustDevilParticles(RenderFeature):
             vao = self._resolve[fragment] = self.ctx.vertex_array(prog, [])
         return vao
 
+    def _compute(self, point_side: int) -> moderngl.ComputeShader:
+        """``shaders/pbvr_scatter.comp`` for points of ``point_side`` pixels (compiled once per side)."""
+        shader = self._computes.get(point_side)
+        if shader is None:
+            version, rest = shader_source(SHADERS / "pbvr_scatter.comp").split("\n", 1)
+            source = f"{version}\n#define POINT_SIDE {point_side}\n#define LOCAL_SIZE {COMPUTE_GROUP}\n{rest}"
+            try:
+                shader = self._computes[point_side] = self.ctx.compute_shader(source)
+            except moderngl.Error as exc:
+                raise RuntimeError(f"shader 'pbvr_scatter.comp' (POINT_SIDE {point_side}) in {SHADERS} failed to "
+                                   f"compile:\n{exc}") from None
+        return shader
+
     def use_scatter(self, repeats: int) -> bool:
-        """Whether R repeats take the scatter path: the context compiles its shaders (probed once) and R <= 64."""
+        """Whether R repeats take the scatter path (R <= 64 and the context compiles its shaders; probed once, and
+        logged): as a compute shader (GL 4.3) if it can, else in the vertex stage (GL 4.2)."""
         if self.scatter is None:
-            self.scatter = False
-            if self.ctx.version_code >= 420:
+            self.scatter, self.compute, reasons = False, False, []
+            if self.ctx.version_code >= 430:
+                try:
+                    self._compute(1)
+                    self._resolve_vao("pbvr_coverage")
+                    self.scatter = self.compute = True
+                except (RuntimeError, moderngl.Error) as exc:
+                    reasons.append(str(exc))
+            if not self.scatter and self.ctx.version_code >= 420:
                 try:
                     self.renderer.load_program(SHADERS, "pbvr_scatter")
                     self._resolve_vao("pbvr_coverage")
                     self.scatter = True
                 except (RuntimeError, moderngl.Error) as exc:  # e.g. no image stores in the vertex stage
-                    LOG.info("dust_devil: PBVR takes the GL 3.3 slab path (the same ensemble, slower): %s", exc)
+                    reasons.append(str(exc))
+            path = ("scatter (compute shader)" if self.compute else "scatter (vertex stage)" if self.scatter
+                    else "GL 3.3 slab (the same ensemble, slower)")
+            LOG.info("dust_devil: PBVR takes the %s path (GL %d)%s", path, self.ctx.version_code,
+                     "".join(f"; {r}" for r in reasons))
         return self.scatter and repeats <= MAX_SCATTER_REPEATS
+
+    @property
+    def path(self) -> str:
+        """The PBVR path probed: 'compute', 'vertex' (both scatter), 'slab', or '-' before the first PBVR frame."""
+        if self.scatter is None:
+            return "-"
+        return "compute" if (self.scatter and self.compute) else "vertex" if self.scatter else "slab"
 
     # ------------------------------------------------------------------------------ passes
     def add_passes(self, graph, view: View, data: list[DevilFrame]) -> None:
@@ -253,13 +310,22 @@ class DustDevilParticles(RenderFeature):
             scene_depth.compare_func = ""  # read raw depth values
             scene_depth.use(0)
             coverage.bind_to_image(0, read=True, write=True, format=GL_R32UI)
-            vao = self._vao(devil, "pbvr_scatter", f"#define POINT_SIDE {math.ceil(devil.point_size)}")
-            set_uniforms(vao.program, view_proj=view.view_proj.T.copy(), sub_particles=devil.sub_particles,
-                         frame_seed=int(self.renderer.frame_index % 2**31), radius=devil.radius,
-                         point_size=devil.point_size, view_size=(view.width, view.height), scene_depth=0)
-            ctx.enable(moderngl.RASTERIZER_DISCARD)
-            vao.render(moderngl.POINTS, vertices=len(devil.positions), instances=devil.repeats * devil.sub_particles)
-            ctx.disable(moderngl.RASTERIZER_DISCARD)
+            uniforms = dict(view_proj=view.view_proj.T.copy(), sub_particles=devil.sub_particles,
+                            frame_seed=int(self.renderer.frame_index % 2**31), radius=devil.radius,
+                            point_size=devil.point_size, view_size=(view.width, view.height), scene_depth=0)
+            if self.compute:
+                n = len(devil.positions)
+                shader = self._compute(math.ceil(devil.point_size))
+                self._particle_buffer(devil).bind_to_storage_buffer(0)
+                set_compute_uniforms(shader, particles=n, repeats=devil.repeats, **uniforms)
+                shader.run((n + COMPUTE_GROUP - 1) // COMPUTE_GROUP)
+            else:
+                vao = self._vao(devil, "pbvr_scatter", f"#define POINT_SIDE {math.ceil(devil.point_size)}")
+                set_uniforms(vao.program, **uniforms)
+                ctx.enable(moderngl.RASTERIZER_DISCARD)
+                vao.render(moderngl.POINTS, vertices=len(devil.positions),
+                           instances=devil.repeats * devil.sub_particles)
+                ctx.disable(moderngl.RASTERIZER_DISCARD)
             ctx.memory_barrier()  # the resolve reads the words through image loads
             scene_depth.compare_func = compare
 
@@ -369,6 +435,9 @@ class DustDevilParticles(RenderFeature):
         for vao in self._resolve.values():
             vao.release()
         self._resolve.clear()
+        for shader in self._computes.values():
+            shader.release()
+        self._computes.clear()
 
 
 class DustDevilMarkers(RenderFeature):

@@ -1,6 +1,6 @@
-"""PBVR's two implementations (headless EGL): the scatter path (GL 4.2 image stores) and the GL 3.3 slab path count,
-per pixel, the repeats whose opaque ensemble image covers it, exactly as a numpy re-implementation of the same
-hashed pseudo-particles does (2.3, seeds/004)."""
+"""PBVR's three implementations (headless EGL): the scatter path as a compute shader (GL 4.3) or in the vertex
+stage (GL 4.2 image stores) and the GL 3.3 slab path count, per pixel, the repeats whose opaque ensemble image
+covers it, exactly as a numpy re-implementation of the same hashed pseudo-particles does (2.3, seeds/004)."""
 
 from pathlib import Path
 
@@ -64,8 +64,10 @@ def reference_counts(positions, view_proj, scene_depth, repeats, sub_particles, 
     return covered.sum(axis=0)
 
 
-def rendered_counts(tmp_path, scatter: bool, repeats: int, name: str, point_size: float = 2.0):
-    """(counts per pixel, reference counts, R) of one frame drawn by the chosen PBVR path."""
+def rendered_counts(tmp_path, pbvr_path: str, repeats: int, name: str, point_size: float = 2.0):
+    """(counts per pixel, reference counts, R) of one frame drawn by the chosen PBVR path: 'compute', 'vertex'
+    (the scatter in a compute shader or in the vertex stage) or 'slab'."""
+    scatter = pbvr_path != "slab"
     path = tmp_path / f"{name}.toml"
     path.write_text(scene_text(amplitude=4.0, position=(0.0, -2.0, 0.0), particle_count=400, prewarm_time=2.0,
                                repeats=repeats, drag_repeats=1, show_markers=False, point_size=point_size,
@@ -75,8 +77,9 @@ def rendered_counts(tmp_path, scatter: bool, repeats: int, name: str, point_size
     app.step(1)
     renderer = make_renderer(app, WIDTH, HEIGHT)
     feature = next(f for f in renderer.features if f.name == "dust_devil")
-    if not scatter:
-        feature.scatter = False
+    assert feature.use_scatter(repeats), "this context has no GL 4.2 image stores in the vertex stage"
+    assert feature.path == "compute", "this context (llvmpipe: GL 4.5) takes the compute path by default"
+    feature.scatter, feature.compute = scatter, pbvr_path == "compute"
     out = {}
     try:
         renderer.extract(app.world)
@@ -84,7 +87,7 @@ def rendered_counts(tmp_path, scatter: bool, repeats: int, name: str, point_size
         view = renderer.views[0]
         devil = extract_devils(app.world)[0]
         target = "coverage" if scatter else "accumulation"
-        assert feature.use_scatter(repeats) is scatter, "this context has no GL 4.2 image stores in the vertex stage"
+        assert feature.path == pbvr_path
 
         def setup(b):
             b.read(f"dust_devil.{devil.entity}.{target}.{view.name}")
@@ -110,10 +113,11 @@ def rendered_counts(tmp_path, scatter: bool, repeats: int, name: str, point_size
     return out["counts"], ref
 
 
-@pytest.mark.parametrize("scatter, repeats, point_size", [(True, 8, 2.0), (True, 40, 1.0), (True, 6, 2.5),
-                                                         (False, 8, 2.0)])
-def test_each_repeat_counts_once_per_pixel_as_the_reference(tmp_path, gl_ctx, scatter, repeats, point_size):
-    counts, ref = rendered_counts(tmp_path, scatter, repeats, f"s{int(scatter)}r{repeats}", point_size)
+@pytest.mark.parametrize("path, repeats, point_size", [("compute", 8, 2.0), ("compute", 40, 1.0),
+                                                       ("compute", 6, 2.5), ("vertex", 8, 2.0), ("vertex", 40, 1.0),
+                                                       ("vertex", 6, 2.5), ("slab", 8, 2.0)])
+def test_each_repeat_counts_once_per_pixel_as_the_reference(tmp_path, gl_ctx, path, repeats, point_size):
+    counts, ref = rendered_counts(tmp_path, path, repeats, f"{path}r{repeats}", point_size)
     covered = ref > 0
     assert covered.sum() > 300 and ref.max() == repeats  # the dense core is covered by every repeat
     assert 0 < (ref < counts.max() - 1).sum()  # partly hidden by the terrain or sparse: not all pixels saturate
