@@ -140,20 +140,41 @@ class App:
             self.tick()
 
     def advance(self, real_dt: float) -> int:
-        """One frame: the ticks the accumulator allows, then rendering. Returns the ticks run."""
+        """One frame: the ticks the accumulator allows and rendering. Returns the ticks run.
+
+        With ``[render] overlap_ticks`` (the default) the frame draws the state the previous frame left while
+        its ticks run (:meth:`render_frame` ``overlap``): one frame more latency, the CPU and the GPU busy at
+        once.  Otherwise the ticks run first, then the frame draws their result."""
         steps = self.clock.advance(real_dt)
-        self.step(steps)
-        self.render_frame()
+        if self.renderer is not None and self.config.render.overlap_ticks:
+            self.render_frame(overlap=lambda: self.step(steps))
+        else:
+            self.step(steps)
+            self.render_frame()
         return steps
 
-    def render_frame(self) -> None:
-        """Render-extract and render stages (skipped when no renderer is attached)."""
+    def render_frame(self, overlap: Callable[[], None] | None = None) -> None:
+        """Render-extract and render stages (skipped when no renderer is attached).
+
+        ``overlap``, typically the next frame's ticks (``lambda: app.step(1)``), runs exactly once during the
+        frame: after render-extract has copied the state to draw, at the point where the renderer would first
+        wait for the GPU (:meth:`engine.render.renderer.Renderer.draw`).  The picture is the one drawn without
+        it, and the ticks are the same ticks, so state hashes do not change; the frame hooks run after both.
+        """
         if self.renderer is None:
+            if overlap is not None:
+                overlap()
             return
         self.startup()
-        for stage in FRAME_STAGES:
-            for system in self.schedule.stage(stage):
-                system.fn(self.world, self.clock.dt)
+        self.renderer.pending_overlap = overlap
+        try:
+            for stage in FRAME_STAGES:
+                for system in self.schedule.stage(stage):
+                    system.fn(self.world, self.clock.dt)
+        finally:
+            overlap, self.renderer.pending_overlap = self.renderer.pending_overlap, None
+        if overlap is not None:  # no render stage consumed it
+            overlap()
         for hook in list(self.frame_hooks):
             hook(self)
 

@@ -57,6 +57,10 @@ class RenderSettings(ConfigModel):
                                 description="3D views render at this fraction of the window size and are upscaled "
                                             "when presented (the HUD stays sharp): the usual remedy for fill-bound "
                                             "software rasterisers.")
+    overlap_ticks: bool = Field(True, description="In a window, run each frame's simulation ticks while the GPU "
+                                                  "draws the previous state (one frame more latency; a software "
+                                                  "rasteriser then draws on its threads while Python simulates). "
+                                                  "False: tick, then draw, one after the other.")
     sky_top: Vec3 = Field((0.25, 0.45, 0.85), description="Sky colour at the zenith (linear RGB).")
     sky_horizon: Vec3 = Field((0.75, 0.85, 0.95), description="Sky colour at the horizon (linear RGB).")
     sun_direction: Vec3 = Field((0.4, 0.8, 0.3), description="Direction towards the sun.")

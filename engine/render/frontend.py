@@ -83,9 +83,17 @@ def _run_headless(app: App, size, steps, every, last, profile: bool) -> None:
     renderer.timer.enabled = profile
     frames = DEFAULT_HEADLESS_FRAMES if steps is None else steps
     written = []
+    overlap = app.config.render.overlap_ticks
+    if overlap and frames:
+        app.step(1)
     for frame in range(1, frames + 1):
-        app.step(1)  # headless: one fixed tick per frame, so the run is exactly reproducible
-        app.render_frame()
+        # headless: one fixed tick per frame, so the run is exactly reproducible.  Overlapped, frame N draws
+        # tick N while tick N + 1 runs (Renderer.draw): the same pictures and the same final state
+        if overlap:
+            app.render_frame(overlap=(lambda: app.step(1)) if frame < frames else None)
+        else:
+            app.step(1)
+            app.render_frame()
         if every and frame % every[0] == 0:
             written.append(renderer.save_screenshot(every[1] / f"frame_{frame:05d}.png"))
     if frames == 0:

@@ -352,6 +352,11 @@ class CompiledGraph:
         self.lifetimes: dict[str, tuple[int, int]] = {
             structure.resources[index].name: span for index, span in sorted(spans.items())}
         self._steps = _steps(structure, order, spans)
+        # the first pass that reads what an earlier pass of the frame wrote (a version >= 1): the GPU must have
+        # finished that work before it can go on, so it is where the CPU would first wait (RenderGraph.execute)
+        self.first_sync: int | None = next((step for step, p in enumerate(order)
+                                            if any(version >= 1 for _, version in reads[p])), None)
+        self.sync_pass: str | None = None if self.first_sync is None else self.order[self.first_sync]
 
     def __repr__(self) -> str:
         return f"CompiledGraph(order={self.order}, culled={self.culled})"
@@ -489,13 +494,22 @@ class RenderGraph:
             self._cache.popitem(last=False)
         return compiled
 
-    def execute(self) -> None:
-        """Compile (cached), then run the passes in order with their resources materialized."""
+    def execute(self, on_sync: Callable[[], None] | None = None) -> None:
+        """Compile (cached), then run the passes in order with their resources materialized.
+
+        ``on_sync`` is called once: just before the first pass that reads what an earlier pass of the frame
+        wrote (:attr:`CompiledGraph.sync_pass`), or after the last pass when none does.  Up to there the GPU
+        has work queued that nothing waits for yet; the renderer flushes it there and lets the CPU do other
+        work (the next simulation ticks) while the GPU, or a software rasteriser's threads, draw.
+        """
         compiled = self.compile()
         objects: dict[int, object] = dict(self._imported)
         acquired: dict[int, object] = {}
         try:
-            for step in compiled._steps:
+            for position, step in enumerate(compiled._steps):
+                if on_sync is not None and position == compiled.first_sync:
+                    callback, on_sync = on_sync, None
+                    callback()
                 self._acquire(step, objects, acquired)
                 self._run(step.pass_index, objects)
                 self._release(step.release, objects, acquired)
@@ -503,6 +517,8 @@ class RenderGraph:
             self._release(tuple(acquired), objects, acquired)  # only left over when a pass raised
             if self._pool is not None:
                 self._pool.advance_frame()
+        if on_sync is not None:
+            on_sync()
 
     def to_dot(self) -> str:
         """The compiled graph in Graphviz format (see :meth:`CompiledGraph.to_dot`)."""

@@ -30,7 +30,8 @@ def draw_system(world: World, dt: float) -> None:
     """Render stage: execute the render graph."""
     renderer = _renderer(world)
     if renderer is not None:
-        renderer.draw()
+        overlap, renderer.pending_overlap = renderer.pending_overlap, None
+        renderer.draw(overlap)
 
 
 def _mesh_command(world: World, entity: int, **values) -> MeshConfig:

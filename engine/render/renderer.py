@@ -33,6 +33,38 @@ log = logging.getLogger("engine.render")
 SHADER_DIR = Path(__file__).parent / "shaders"
 
 
+def _find_gl_flush() -> Callable[[], None]:
+    """glFlush of the current context (moderngl has glFinish only).  A flush hands the queued commands to the
+    GPU without waiting; llvmpipe starts rasterising them on its threads.  Without a GL library to call into,
+    a no-op: the commands then run at the next wait, as before."""
+    import ctypes
+    import ctypes.util
+
+    names = [ctypes.util.find_library("OpenGL"), "libOpenGL.so.0", ctypes.util.find_library("GL"), "libGL.so.1"]
+    for name in names:
+        if not name:
+            continue
+        try:
+            flush = ctypes.CDLL(name).glFlush
+        except (OSError, AttributeError):
+            continue
+        flush.restype, flush.argtypes = None, []
+        return flush
+    log.info("glFlush not found: the next ticks run after each frame instead of while it is drawn")
+    return lambda: None
+
+
+_gl_flush: Callable[[], None] | None = None
+
+
+def gl_flush() -> None:
+    """Flush the current GL context's queued commands (see :func:`_find_gl_flush`)."""
+    global _gl_flush
+    if _gl_flush is None:
+        _gl_flush = _find_gl_flush()
+    _gl_flush()
+
+
 class PassTimer:
     """Per-pass timings: GL timer queries when profiling (exact GPU time), CPU time otherwise."""
 
@@ -116,6 +148,7 @@ class Renderer:
         self.timer = PassTimer(ctx)
         self.views: list[View] = []
         self.show_profiler = False
+        self.pending_overlap: Callable[[], None] | None = None  # App.render_frame's overlap, run by draw()
         self._data: list[Any] = []
         self.fps = 0.0
         self._last_draw: float | None = None
@@ -302,9 +335,23 @@ class Renderer:
                 feature.add_passes(timed, screen, data[index])
         return graph
 
-    def draw(self) -> None:
-        """Render stage: declare, compile (cached) and execute the graph; present in a window."""
-        self.declare().execute()
+    def draw(self, overlap: Callable[[], None] | None = None) -> None:
+        """Render stage: declare, compile (cached) and execute the graph; present in a window.
+
+        ``overlap`` (the next simulation ticks, :meth:`engine.app.App.render_frame`) runs once while the GPU
+        draws: at the graph's first synchronisation point (the first pass that reads what an earlier one
+        wrote, :attr:`~engine.render.graph.CompiledGraph.sync_pass`) the queued passes are flushed, so the
+        GPU, or a software rasteriser's threads, draw them while the CPU runs ``overlap``.  The passes use
+        only what render-extract copied, so the picture is the same as when the ticks run after the frame.
+        """
+        if overlap is None:
+            self.declare().execute()
+        else:
+            def sync() -> None:
+                gl_flush()
+                overlap()
+
+            self.declare().execute(on_sync=sync)
         now = time.perf_counter()
         if self._last_draw is not None:
             self.fps = 0.9 * self.fps + 0.1 / max(now - self._last_draw, 1e-6) if self.fps else 1.0 / (now - self._last_draw)
