@@ -119,20 +119,27 @@ def screen_rect(positions: np.ndarray, view_proj: np.ndarray, width: int, height
     if not len(positions):
         return None
     m = view_proj.astype(np.float64)
-    clip = positions.astype(np.float64) @ m[:, :3].T + m[:, 3]
+    rows = m[[0, 1, 3]]  # clip x, y, w (z is not needed): one (N, 3) product, each axis then as a column
+    clip = positions.astype(np.float64) @ rows[:, :3].T
+    clip += rows[:, 3]
+    w = clip[:, 2]
     reach_w = radius * np.linalg.norm(m[3, :3])
-    near = clip[:, 3] - reach_w
-    if (near <= 1e-9).any():
+    near = w - reach_w
+    if near.min() <= 1e-9:
         return 0, 0, width, height
-    ndc = clip[:, :2] / clip[:, 3:]
-    margin = (radius * np.linalg.norm(m[:2, :3], axis=1) + np.abs(ndc) * reach_w) / near[:, None]
-    size = np.array([width, height], np.float64)
+    inv_near = 1.0 / near
+    reach = radius * np.linalg.norm(m[:2, :3], axis=1)
     pixels = 0.5 * point_size + 1.0
-    first = np.floor((((ndc - margin).min(axis=0)) * 0.5 + 0.5) * size - pixels).clip(0, size).astype(int)
-    last = np.ceil((((ndc + margin).max(axis=0)) * 0.5 + 0.5) * size + pixels).clip(0, size).astype(int)
-    if (last <= first).any():
+    first, last = [], []
+    for axis, size in enumerate((width, height)):
+        ndc = clip[:, axis] / w
+        margin = (np.abs(ndc) * reach_w + reach[axis]) * inv_near
+        low, high = float((ndc - margin).min()), float((ndc + margin).max())
+        first.append(min(max(math.floor((low * 0.5 + 0.5) * size - pixels), 0), size))
+        last.append(min(max(math.ceil((high * 0.5 + 0.5) * size + pixels), 0), size))
+    if last[0] <= first[0] or last[1] <= first[1]:
         return None
-    return int(first[0]), int(first[1]), int(last[0] - first[0]), int(last[1] - first[1])
+    return first[0], first[1], last[0] - first[0], last[1] - first[1]
 
 
 class DustDevilParticles(RenderFeature):
@@ -148,7 +155,7 @@ class DustDevilParticles(RenderFeature):
         self.declared_repeats: dict[tuple[int, str], int] = {}  # (entity, view) -> R of the last declared frame
         self.scatter: bool | None = None  # the coverage-word scatter path; None: probed at the first PBVR frame
         self.compute = False  # the scatter as a compute shader (GL 4.3); else in the vertex stage (GL 4.2)
-        self._computes: dict[int, moderngl.ComputeShader] = {}  # POINT_SIDE -> pbvr_scatter.comp
+        self._computes: dict[int | str, moderngl.ComputeShader] = {}  # POINT_SIDE: pbvr_scatter.comp; "clear"
         self._resolve: dict[str, moderngl.VertexArray] = {}
 
     def extract(self, world) -> list[DevilFrame]:
@@ -216,6 +223,17 @@ class DustDevilParticles(RenderFeature):
                                    f"compile:\n{exc}") from None
         return shader
 
+    def _compute_clear(self) -> moderngl.ComputeShader:
+        """``shaders/pbvr_clear.comp`` (compiled once)."""
+        shader = self._computes.get("clear")
+        if shader is None:
+            try:
+                shader = self._computes["clear"] = self.ctx.compute_shader(
+                    shader_source(SHADERS / "pbvr_clear.comp"))
+            except moderngl.Error as exc:
+                raise RuntimeError(f"shader 'pbvr_clear.comp' in {SHADERS} failed to compile:\n{exc}") from None
+        return shader
+
     def use_scatter(self, repeats: int) -> bool:
         """Whether R repeats take the scatter path (R <= 64 and the context compiles its shaders; probed once, and
         logged): as a compute shader (GL 4.3) if it can, else in the vertex stage (GL 4.2)."""
@@ -224,6 +242,7 @@ class DustDevilParticles(RenderFeature):
             if self.ctx.version_code >= 430:
                 try:
                     self._compute(1)
+                    self._compute_clear()
                     self._resolve_vao("pbvr_coverage")
                     self.scatter = self.compute = True
                 except (RuntimeError, moderngl.Error) as exc:
@@ -286,6 +305,13 @@ class DustDevilParticles(RenderFeature):
 
         def clear(pc):
             if rect is None:
+                return
+            if self.compute:
+                pc.get(h["cov"]).bind_to_image(0, read=False, write=True, format=GL_R32UI)
+                shader = self._compute_clear()
+                set_compute_uniforms(shader, rect=rect, view_height=view.height)
+                shader.run((rect[2] + 7) // 8, (rect[3] + 7) // 8, words)
+                self.ctx.memory_barrier()  # the scatter ORs into these words
                 return
             fbo = self.renderer.framebuffer(pc.get(h["cov"]))
             fbo.use()

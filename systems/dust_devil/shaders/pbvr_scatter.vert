@@ -38,9 +38,13 @@ void main() {
     for (int dy = 0; dy < POINT_SIDE; ++dy) {
         for (int dx = 0; dx < POINT_SIDE; ++dx) {
             ivec2 q = first + ivec2(dx, dy);
+            ivec2 word = ivec2(q.x, q.y + row);
+            // a plain load first: most pseudo-particles land on a pixel this repeat already covers, and an atomic
+            // costs far more (the bits only ever get set in this pass, so a set bit stays set)
             if (all(lessThan(q, last)) && all(greaterThanEqual(q, ivec2(0)))
+                    && (imageLoad(coverage, word).r & bit) == 0u
                     && depth <= texelFetch(scene_depth, q, 0).r) {  // opaque scene in front hides it
-                imageAtomicOr(coverage, ivec2(q.x, q.y + row), bit);
+                imageAtomicOr(coverage, word, bit);
             }
         }
     }

@@ -64,9 +64,11 @@ def reference_counts(positions, view_proj, scene_depth, repeats, sub_particles, 
     return covered.sum(axis=0)
 
 
-def rendered_counts(tmp_path, pbvr_path: str, repeats: int, name: str, point_size: float = 2.0):
+def rendered_counts(tmp_path, pbvr_path: str, repeats: int, name: str, point_size: float = 2.0,
+                    earlier_frames: int = 0):
     """(counts per pixel, reference counts, R) of one frame drawn by the chosen PBVR path: 'compute', 'vertex'
-    (the scatter in a compute shader or in the vertex stage) or 'slab'."""
+    (the scatter in a compute shader or in the vertex stage) or 'slab'; after ``earlier_frames`` frames (other
+    ensembles, whose coverage must not leak into this one)."""
     scatter = pbvr_path != "slab"
     path = tmp_path / f"{name}.toml"
     path.write_text(scene_text(amplitude=4.0, position=(0.0, -2.0, 0.0), particle_count=400, prewarm_time=2.0,
@@ -82,6 +84,8 @@ def rendered_counts(tmp_path, pbvr_path: str, repeats: int, name: str, point_siz
     feature.scatter, feature.compute = scatter, pbvr_path == "compute"
     out = {}
     try:
+        for _ in range(earlier_frames):
+            renderer.render(app.world)
         renderer.extract(app.world)
         graph = renderer.declare()
         view = renderer.views[0]
@@ -125,6 +129,15 @@ def test_each_repeat_counts_once_per_pixel_as_the_reference(tmp_path, gl_ctx, pa
     # float32 on the GPU vs float64 here: a pseudo-particle on a pixel edge may land one pixel over
     assert np.abs(counts - ref).sum() <= 0.01 * ref.sum()
     assert (counts != ref).sum() <= 0.03 * covered.sum()
+
+
+@pytest.mark.parametrize("pbvr_path, repeats", [("compute", 8), ("compute", 40), ("vertex", 8)])
+def test_coverage_is_cleared_between_frames(tmp_path, gl_ctx, pbvr_path, repeats):
+    """The third frame's counts are its own ensemble's: the coverage words are zeroed inside the cloud's
+    rectangle (both words per pixel for R > 32) before every scatter."""
+    counts, ref = rendered_counts(tmp_path, pbvr_path, repeats, f"clear_{pbvr_path}{repeats}", 1.0, earlier_frames=2)
+    assert ref.sum() > 300
+    assert np.abs(counts - ref).sum() <= 0.01 * ref.sum()
 
 
 @pytest.mark.parametrize("eye, spread, radius", [((0.0, 6.0, 25.0), 1.5, 0.8), ((0.0, 5.0, 6.0), 0.7, 0.6)])
