@@ -155,7 +155,7 @@ class DustDevilParticles(RenderFeature):
         self.declared_repeats: dict[tuple[int, str], int] = {}  # (entity, view) -> R of the last declared frame
         self.scatter: bool | None = None  # the coverage-word scatter path; None: probed at the first PBVR frame
         self.compute = False  # the scatter as a compute shader (GL 4.3); else in the vertex stage (GL 4.2)
-        self._computes: dict[int | str, moderngl.ComputeShader] = {}  # POINT_SIDE: pbvr_scatter.comp; "clear"
+        self._computes: dict[int, moderngl.ComputeShader] = {}  # POINT_SIDE -> pbvr_scatter.comp
         self._resolve: dict[str, moderngl.VertexArray] = {}
 
     def extract(self, world) -> list[DevilFrame]:
@@ -223,17 +223,6 @@ class DustDevilParticles(RenderFeature):
                                    f"compile:\n{exc}") from None
         return shader
 
-    def _compute_clear(self) -> moderngl.ComputeShader:
-        """``shaders/pbvr_clear.comp`` (compiled once)."""
-        shader = self._computes.get("clear")
-        if shader is None:
-            try:
-                shader = self._computes["clear"] = self.ctx.compute_shader(
-                    shader_source(SHADERS / "pbvr_clear.comp"))
-            except moderngl.Error as exc:
-                raise RuntimeError(f"shader 'pbvr_clear.comp' in {SHADERS} failed to compile:\n{exc}") from None
-        return shader
-
     def use_scatter(self, repeats: int) -> bool:
         """Whether R repeats take the scatter path (R <= 64 and the context compiles its shaders; probed once, and
         logged): as a compute shader (GL 4.3) if it can, else in the vertex stage (GL 4.2)."""
@@ -242,7 +231,6 @@ class DustDevilParticles(RenderFeature):
             if self.ctx.version_code >= 430:
                 try:
                     self._compute(1)
-                    self._compute_clear()
                     self._resolve_vao("pbvr_coverage")
                     self.scatter = self.compute = True
                 except (RuntimeError, moderngl.Error) as exc:
@@ -305,13 +293,6 @@ class DustDevilParticles(RenderFeature):
 
         def clear(pc):
             if rect is None:
-                return
-            if self.compute:
-                pc.get(h["cov"]).bind_to_image(0, read=False, write=True, format=GL_R32UI)
-                shader = self._compute_clear()
-                set_compute_uniforms(shader, rect=rect, view_height=view.height)
-                shader.run((rect[2] + 7) // 8, (rect[3] + 7) // 8, words)
-                self.ctx.memory_barrier()  # the scatter ORs into these words
                 return
             fbo = self.renderer.framebuffer(pc.get(h["cov"]))
             fbo.use()
