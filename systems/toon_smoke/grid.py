@@ -103,9 +103,57 @@ def sample_mac(u: F32, v: F32, w: F32, px: F32, py: F32, pz: F32) -> tuple[F32, 
 
 def sample_mac_points(u: F32, v: F32, w: F32, points: NDArray) -> tuple[F32, F32, F32]:
     """:func:`sample_mac` at points (3, …) in cell units."""
-    points = np.asarray(points)
-    return tuple(trilinear_points(c.shape, points - _STAGGER[name].astype(points.dtype, copy=False)).gather(c)
-                 for name, c in (("u", u), ("v", v), ("w", w)))
+    return MacSampler(u, v, w).sample(points)
+
+
+class MacSampler:
+    """Samples a MAC velocity (u, v, w on their staggered grids) at many points, the three components in one pass.
+
+    The three face grids are laid end to end in one flat vector (copied once per sampler, so a sampler serves every
+    query of a step), and each component's corners index into it with the grid's offset: one clamp, one floor, one
+    gather and one blend for all three components instead of one each.  Every element sees the same operations, in
+    the same order and precision, as :func:`trilinear_points` per component, so the values have the same bits.
+    """
+
+    def __init__(self, u: F32, v: F32, w: F32) -> None:
+        self.values = np.concatenate((u.reshape(-1), v.reshape(-1), w.reshape(-1)))
+        self.tables = _mac_tables(u.shape, v.shape, w.shape)
+
+    def sample(self, points: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+        """(u, v, w) at points (3, …) in cell units (float32 points give float32 results, others float64)."""
+        points = np.asarray(points)
+        stagger, upper32, upper64, last, strides, corners = self.tables
+        float32 = points.dtype == np.float32
+        # (component, axis, point) coordinates in each component's index space, clamped to its grid
+        c = np.subtract(points.reshape(1, 3, -1), stagger.astype(points.dtype, copy=False))
+        np.maximum(c, 0.0, out=c)  # = np.clip (NaN included), without its wrapper's cost
+        np.minimum(c, upper32 if float32 else upper64, out=c)
+        i = c.astype(np.intp)
+        np.minimum(i, last, out=i)
+        f = c - i.astype(np.float32 if float32 else np.float64)
+        i *= strides
+        base = i[:, 0] + i[:, 1]
+        base += i[:, 2]
+        blend = Trilinear(base[:, None, :] + corners, f[:, 0], f[:, 1, None, :], f[:, 2, None, :], points.shape[1:])
+        out = blend._blend(self.values.take(blend.corners))
+        return tuple(out[k].reshape(blend.shape) for k in range(3))
+
+
+_MAC_TABLES: dict[tuple, tuple] = {}
+
+
+def _mac_tables(*shapes: tuple[int, int, int]) -> tuple:
+    """Per (u, v, w) shapes: staggers (3, 3, 1), upper bounds (float32, float64), largest base index and strides
+    (3, 3, 1), and the corner offsets of each component (3, 8, 1) including its grid's start in the joint vector."""
+    key = tuple(tuple(s) for s in shapes)
+    if key not in _MAC_TABLES:
+        bounds = [_bounds(s) for s in key]
+        start = np.cumsum([0] + [int(np.prod(s)) for s in key[:-1]])
+        stagger = np.stack([_STAGGER[name] for name in "uvw"])
+        _MAC_TABLES[key] = (stagger, np.stack([b[0] for b in bounds]), np.stack([b[1] for b in bounds]),
+                            np.stack([b[2] for b in bounds]), np.stack([b[3] for b in bounds]),
+                            np.stack([b[4] + s for b, s in zip(bounds, start)]))
+    return _MAC_TABLES[key]
 
 
 def upsample_linear(values: F32, factor: int) -> F32:

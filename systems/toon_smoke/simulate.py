@@ -12,6 +12,7 @@ Systems: ``toon_smoke.simulate`` (phases 1–3, simulation stage) and ``toon_smo
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -23,7 +24,7 @@ from engine.spatial import Transform, quat_conjugate, quat_rotate
 from engine.world import World
 from systems.toon_smoke import fluid, poisson
 from systems.toon_smoke.display import blob_axes, extract_isosurface, noise_factor, splat_blobs
-from systems.toon_smoke.grid import Geometry, sample_mac_points, trilinear_points, upsample_linear
+from systems.toon_smoke.grid import Geometry, MacSampler, trilinear_points, upsample_linear
 
 _UP = np.array([0.0, 1.0, 0.0])
 
@@ -87,18 +88,25 @@ def update_obstacles(world: World | None, entity: int, transform: Transform, cfg
 
 
 def _overlapping_colliders(world: World, entity: int, transform: Transform, cfg: ToonSmokeVolumeConfig) -> list:
+    """Colliders that may reach into the volume (a cheap bounding test per collider entity, every step).
+
+    Lengths are ``sqrt(d·d)``, exactly what ``np.linalg.norm`` computes for a vector, without its wrapper's cost."""
     if not cfg.collide_with_colliders:
         return []
-    reach = 0.5 * float(np.linalg.norm(cfg.extent))
+    extent = np.asarray(cfg.extent, float)
+    reach = 0.5 * math.sqrt(extent.dot(extent))
     found = []
     for other, (t, collider) in world.query(Transform, Collider):
         if other == entity or collider.is_trigger:
             continue
-        gap = float(np.linalg.norm(t.position - transform.position)) - reach
+        d = t.position - transform.position
+        gap = math.sqrt(d.dot(d)) - reach
         if collider.shape == "sphere" and gap > collider.radius * float(np.max(np.abs(t.scale))):
             continue
-        if collider.shape == "box" and gap > float(np.linalg.norm(collider.half_extents * t.scale)):
-            continue
+        if collider.shape == "box":
+            e = collider.half_extents * t.scale
+            if gap > math.sqrt(e.dot(e)):
+                continue
         if collider.shape == "heightfield":
             top = t.position[1] + float(collider.heightfield.heights.max())
             if transform.position[1] - reach > top:
@@ -227,9 +235,12 @@ def spawn_positions(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, rng: np.r
     return (rng.random((count, 3)) - 0.5) * extent
 
 
-def particle_velocity(geo: Geometry, state: ToonSmokeState, local: np.ndarray) -> np.ndarray:
-    """Fluid velocity (m/s) at local positions, each component from its staggered grid."""
-    return np.stack(sample_mac_points(state.u, state.v, state.w, geo.to_cells(local).T), axis=-1)
+def particle_velocity(geo: Geometry, state: ToonSmokeState, local: np.ndarray,
+                      sampler: MacSampler | None = None) -> np.ndarray:
+    """Fluid velocity (m/s) at local positions, each component from its staggered grid (``sampler``: one built
+    from the state's current u, v, w, to share between the queries of a step)."""
+    sampler = MacSampler(state.u, state.v, state.w) if sampler is None else sampler
+    return np.stack(sampler.sample(geo.to_cells(local).T), axis=-1)
 
 
 def advect_particles(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, dt: float, rng: np.random.Generator
@@ -240,8 +251,9 @@ def advect_particles(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, dt: floa
     if len(p) == 0:
         state.particle_velocity = np.zeros((0, 3))
         return
-    mid = p + 0.5 * dt * particle_velocity(geo, state, p)
-    velocity = particle_velocity(geo, state, mid)
+    sampler = MacSampler(state.u, state.v, state.w)  # the velocity does not change during this phase
+    mid = p + 0.5 * dt * particle_velocity(geo, state, p, sampler)
+    velocity = particle_velocity(geo, state, mid, sampler)
     p = p + dt * velocity
     state.particle_age += dt
     half = 0.5 * np.asarray(cfg.extent, float)
@@ -254,7 +266,7 @@ def advect_particles(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, dt: floa
     if count:
         p[reborn] = spawn_positions(cfg, state, rng, count)
         state.particle_age[reborn] = 0.0
-        velocity[reborn] = particle_velocity(geo, state, p[reborn])
+        velocity[reborn] = particle_velocity(geo, state, p[reborn], sampler)
     state.particles = p
     state.particle_velocity = velocity  # the midpoint velocity stretches the blobs (figure 2)
 
