@@ -44,8 +44,9 @@ def splat_blobs(target: F32, centres: NDArray[np.float64], directions: NDArray[n
     q² = (d·û)²/a² + (|d|² − (d·û)²)/b² < 1 (a smooth, compactly supported bump).  Particles are grouped by the
     stencil radius they need (⌈a⌉ cells, at most a handful of groups), each group is evaluated as one
     (particles × stencil) array (two small matrix products, see :func:`_splat_group`) and scattered with an
-    unbuffered ``np.add.at`` (sequential in index order, so the sum repeats bit for bit) into a copy of the grid
-    padded by the largest reach, so no bounds test is needed; the interior is added back at the end.  Blobs centred
+    unbuffered ``np.add.at`` (sequential in index order, so the sum repeats bit for bit) into a zeroed box that
+    holds every stencil (the grid padded by the largest reach, cut to the blobs' extent), so no bounds test is
+    needed; the box's part inside the grid is added back at the end.  Blobs centred
     more than one cell outside the grid are skipped (particles never are: they are reborn when they leave).
     Returns the number of blobs added.
     """
@@ -58,19 +59,28 @@ def splat_blobs(target: F32, centres: NDArray[np.float64], directions: NDArray[n
             return 0
     reach = np.maximum(np.ceil(along).astype(np.int64), 1)
     pad = int(reach.max()) + 2
-    shape = tuple(n + 2 * pad for n in target.shape)
-    padded = np.zeros(shape, np.float32)
-    flat = padded.reshape(-1)
+    centres = centres + pad  # index space of the grid padded by ``pad`` cells on every side
+    # Only the box the stencils can reach is allocated and added back: the rounded centre cell of each blob (as in
+    # _splat_group) ± its reach.  Cells outside it would only have received + 0.
+    base = np.rint(centres.astype(np.float32)).astype(np.intp)
+    lo = (base - reach[:, None]).min(axis=0)
+    hi = (base + reach[:, None]).max(axis=0) + 1
+    shape = tuple(int(n) for n in hi - lo)
+    box = np.zeros(shape, np.float32)
+    flat = box.reshape(-1)
     for r in np.unique(reach):  # loop over stencil sizes, each vectorized over its particles
         members = np.flatnonzero(reach == r)
         stencil = _stencil(int(r), shape)
         batch = max(1, _SPLAT_CHUNK // len(stencil[0]))
         for start in range(0, len(members), batch):
             sel = members[start:start + batch]
-            _splat_group(flat, shape, centres[sel] + pad, directions[sel], along[sel], across[sel], stencil,
+            _splat_group(flat, shape, lo, centres[sel], directions[sel], along[sel], across[sel], stencil,
                          amplitude)
-    core = tuple(slice(pad, pad + n) for n in target.shape)
-    target += padded[core]
+    start = np.maximum(lo, pad)  # the part of the box inside the target (target cell i is padded cell i + pad)
+    stop = np.minimum(hi, np.array(target.shape) + pad)
+    if np.all(stop > start):
+        target[tuple(slice(a - pad, b - pad) for a, b in zip(start, stop))] += box[
+            tuple(slice(a - o, b - o) for a, b, o in zip(start, stop, lo))]
     return len(centres)
 
 
@@ -82,6 +92,8 @@ def _stencil(reach: int, shape: tuple[int, ...]) -> tuple[NDArray[np.intp], NDAr
     in a grid of ``shape`` (S,), their (x, y, z) offsets as float32 (3, S) and their squared lengths |o|² (S,)."""
     key = (reach, shape)
     if key not in _STENCILS:
+        if len(_STENCILS) >= 64:  # the splat box changes shape with the smoke: keep the cache small
+            _STENCILS.clear()
         r = np.arange(-reach, reach + 1)
         offsets = np.stack(np.meshgrid(r, r, r, indexing="ij"), axis=-1).reshape(-1, 3)
         offsets = offsets[(offsets * offsets).sum(axis=1) <= (reach + 0.87) ** 2]
@@ -91,18 +103,22 @@ def _stencil(reach: int, shape: tuple[int, ...]) -> tuple[NDArray[np.intp], NDAr
     return _STENCILS[key]
 
 
-def _splat_group(flat: F32, shape: tuple[int, ...], centres, directions, along, across, stencil, amplitude) -> None:
+def _splat_group(flat: F32, shape: tuple[int, ...], origin: NDArray[np.intp], centres, directions, along, across,
+                 stencil, amplitude) -> None:
     """One stencil size: q for every (particle, offset) pair from two (M×3)·(3×S) products, since with
     d = f + o (f the rounded cell's offset from the centre, o the stencil offset):
-    d·û = f·û + o·û and |d|² = |f|² + 2 f·o + |o|².  Only the pairs inside the ellipsoid (q > 0) are finished."""
+    d·û = f·û + o·û and |d|² = |f|² + 2 f·o + |o|².  Only the pairs inside the ellipsoid (q > 0) are finished.
+    ``flat`` is a box of ``shape`` whose cell 0 is the cell ``origin`` of the centres' index space."""
     offset_flat, offsets_t, offsets_sq = stencil
     c = centres.astype(np.float32)
     base = np.rint(c).astype(np.intp)
     frac = base.astype(np.float32) - c
     axis = directions.astype(np.float32)
-    t = (frac * axis).sum(axis=1)[:, None] + axis @ offsets_t
+    t = axis @ offsets_t  # + f·û below: the sums of the two terms, in place (addition commutes bit for bit)
+    t += (frac * axis).sum(axis=1)[:, None]
     # 2·(f·o) as (2f)·o: doubling is exact, so the product has the same bits
-    dist2 = (frac * frac).sum(axis=1)[:, None] + (frac + frac) @ offsets_t
+    dist2 = (frac + frac) @ offsets_t
+    dist2 += (frac * frac).sum(axis=1)[:, None]
     dist2 += offsets_sq
     inv_a2 = (1.0 / along ** 2).astype(np.float32)[:, None]
     inv_b2 = (1.0 / across ** 2).astype(np.float32)[:, None]
@@ -112,6 +128,7 @@ def _splat_group(flat: F32, shape: tuple[int, ...], centres, directions, along, 
     t += dist2  # 1 − q (q of the docstring of :func:`splat_blobs`)
     keep = np.flatnonzero(t < 1.0)  # q = 1 − that > 0 exactly where that < 1 (Sterbenz: 1 − x is exact there)
     q = 1.0 - t.reshape(-1)[keep]
+    base -= origin
     base_flat = (base[:, 0] * shape[1] + base[:, 1]) * shape[2] + base[:, 2]
     index = (base_flat[:, None] + offset_flat).reshape(-1)[keep]
     np.add.at(flat, index, np.float32(amplitude) * q * q * q)
