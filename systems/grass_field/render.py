@@ -60,7 +60,7 @@ def _data_texture(ctx: moderngl.Context, texels: np.ndarray, dtype: str = "f4") 
     """A 2-D texture holding ``texels`` (n, c) row by row, ``TEXTURE_WIDTH`` texels per row; nearest filtering."""
     texels = np.asarray(texels)
     n, comps = max(1, len(texels)), texels.shape[1]
-    w = min(TEXTURE_WIDTH, n)
+    w = TEXTURE_WIDTH  # always: the shaders split an index into (column, row) with a mask and a shift
     h = -(-n // w)
     data = np.zeros((w * h, comps), dtype=np.float32 if dtype == "f4" else np.int32)
     data[:len(texels)] = texels
@@ -71,10 +71,13 @@ def _data_texture(ctx: moderngl.Context, texels: np.ndarray, dtype: str = "f4") 
 
 def plant_texels(position: np.ndarray, yaw: np.ndarray, scale: np.ndarray, variant: np.ndarray,
                  tint: np.ndarray) -> np.ndarray:
-    """(2N, 4) float32: per plant (x, y, z, yaw), (scale, variant, tint, 0) — see ``shaders/plant.vert``."""
+    """(2N, 4) float32: per plant (x, y, z, scale), (cos yaw, sin yaw, tint, variant) — see
+    ``shaders/plant.vert``.  The rotation's cosine and sine are taken once per plant here (in float64), not per
+    vertex in the shader."""
+    yaw = np.asarray(yaw, dtype=np.float64)
     out = np.zeros((len(position), 2, 4), dtype=np.float32)
-    out[:, 0, :3], out[:, 0, 3] = position, yaw
-    out[:, 1, 0], out[:, 1, 1], out[:, 1, 2] = scale, variant, tint
+    out[:, 0, :3], out[:, 0, 3] = position, scale
+    out[:, 1, 0], out[:, 1, 1], out[:, 1, 2], out[:, 1, 3] = np.cos(yaw), np.sin(yaw), tint, variant
     return out.reshape(-1, 4)
 
 

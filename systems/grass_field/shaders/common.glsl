@@ -1,13 +1,16 @@
 // GrassField helpers shared by its shaders (same conventions as systems/grass_field/layout.py and impostor.py).
 
-// Texel i of a data texture laid out row by row.
+// Texel i of a data texture laid out row by row, DATA_WIDTH = 4096 texels a row (render.py's TEXTURE_WIDTH): a
+// mask and a shift split the index (a division by a texture's run-time width is one scalar division per lane).
+const int DATA_WIDTH_LOG2 = 12;
+ivec2 data_texel(int i) {
+    return ivec2(i & ((1 << DATA_WIDTH_LOG2) - 1), i >> DATA_WIDTH_LOG2);
+}
 vec4 fetch(sampler2D tex, int i) {
-    int w = textureSize(tex, 0).x;
-    return texelFetch(tex, ivec2(i % w, i / w), 0);
+    return texelFetch(tex, data_texel(i), 0);
 }
 int fetch_int(isampler2D tex, int i) {
-    int w = textureSize(tex, 0).x;
-    return texelFetch(tex, ivec2(i % w, i / w), 0).r;
+    return texelFetch(tex, data_texel(i), 0).r;
 }
 
 // Rotation by azimuth a in the xz plane: (x, z) -> (x cos a - z sin a, x sin a + z cos a).

@@ -1,33 +1,66 @@
 #version 330
+#include "lit.glsl"
 #include "common.glsl"
 // Levels 0-3 (table 1), instanced: one instance per plant listed for this level.
 // Instance i draws plant plant_list[list_offset + i]; the indexed vertex comes from the plant's variant:
 // mesh_tex[variant * mesh_verts + gl_VertexID] (2 texels per vertex).
+// Lit per vertex (Gouraud, as the paper's OpenGL pipeline lit its plants), both faces of a leaf: the normal is
+// turned towards the eye.  On llvmpipe the vertex work runs once per vertex while the fragment work runs per
+// covered pixel on a handful of interpolated inputs, and the near plants cover far more pixels than they have
+// vertices.  Lines and dots (levels 2-3) have no surface and take a fixed light.
+// Variants (render.py): DEBUG_LEVELS (the debug view), FOG (the view has fog).  llvmpipe runs both sides of
+// every branch, so the lighting is computed once, with selects, and what a variant leaves out costs nothing.
 uniform mat4 view_proj;
 uniform sampler2D mesh_tex;
 uniform int mesh_verts;
-uniform sampler2D plant_tex;   // per plant: (x, y, z, yaw), (scale, variant, tint, 0)
+uniform sampler2D plant_tex;   // per plant: (x, y, z, scale), (cos yaw, sin yaw, tint, variant)
 uniform isampler2D plant_list;
 uniform int list_offset;
 uniform vec3 stem_color;
 uniform vec3 leaf_base_color;
 uniform vec3 leaf_tip_color;
-out vec3 v_pos;
-out vec3 v_normal;
-out vec3 v_albedo;
-flat out float v_kind;
+#ifdef DEBUG_LEVELS
+uniform int debug_level;  // the level to show
+#endif
+out vec3 v_color;
+#ifdef FOG
+out float v_fog;  // lit.glsl's fog factor
+#endif
 void main() {
     int plant = fetch_int(plant_list, list_offset + gl_InstanceID);
     vec4 p0 = fetch(plant_tex, 2 * plant);
     vec4 p1 = fetch(plant_tex, 2 * plant + 1);
-    int vid = int(p1.y + 0.5) * mesh_verts + gl_VertexID;
+    int vid = int(p1.w + 0.5) * mesh_verts + gl_VertexID;
     vec4 a = fetch(mesh_tex, 2 * vid);
     vec4 b = fetch(mesh_tex, 2 * vid + 1);
-    vec3 world = rotate_xz(a.xyz * p1.x, p0.w) + p0.xyz;
-    v_pos = world;
-    v_normal = rotate_xz(b.xyz, p0.w);
-    v_kind = b.w;
-    vec3 albedo = (b.w > 0.5 && b.w < 1.5) ? mix(leaf_base_color, leaf_tip_color, a.w) : stem_color;
-    v_albedo = albedo * (1.0 + p1.z);
+    // rotation by the plant's yaw in the xz plane (common.glsl's rotate_xz, cosine and sine given per plant)
+    vec3 world = vec3(a.x * p1.x - a.z * p1.y, a.y, a.x * p1.y + a.z * p1.x) * p0.w + p0.xyz;
+    vec3 n = normalize(vec3(b.x * p1.x - b.z * p1.y, b.y, b.x * p1.y + b.z * p1.x));
+    float kind = b.w;  // 0 tube, 1 leaf, 2 line or dot
+    vec3 albedo = (kind > 0.5 && kind < 1.5) ? mix(leaf_base_color, leaf_tip_color, a.w) : stem_color;
+    albedo *= 1.0 + p1.z;
+    vec3 to_eye = camera_pos - world;
+    bool dots = kind > 1.5;
+    n = dots ? vec3(0.0, 1.0, 0.0) : (dot(n, to_eye) < 0.0 ? -n : n);
+    // lit.glsl's shade() with shininess 16 as four squarings; lines and dots have no specular term (strength 0)
+    // and are drawn at 80 %
+    float strength = dots ? 0.0 : (kind > 0.5 ? 0.05 : 0.02);
+    float ndl = max(dot(n, sun_dir), 0.0);
+    vec3 hemi = mix(sky_horizon * 0.35, sky_top, n.y * 0.5 + 0.5) * ambient;
+    vec3 h = normalize(normalize(to_eye) + sun_dir);
+    float spec = max(dot(n, h), 0.0);
+    spec *= spec;
+    spec *= spec;
+    spec *= spec;
+    spec *= spec;
+    vec3 c = albedo * (sun_color * ndl + hemi) + sun_color * (spec * strength) * ndl;
+    c *= dots ? 0.8 : 1.0;
+#ifdef DEBUG_LEVELS
+    c = debug_tint(c, debug_level);
+#endif
+#ifdef FOG
+    v_fog = clamp(1.0 - exp(-length(to_eye) * fog_density), 0.0, 1.0);
+#endif
+    v_color = c;
     gl_Position = view_proj * vec4(world, 1.0);
 }
