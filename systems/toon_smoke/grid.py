@@ -167,26 +167,36 @@ def upsample_linear(values: F32, factor: int) -> F32:
     out = values
     for axis in range(3):
         n = out.shape[axis]
-        i0, i1, t = _axis_weights(n, factor)
-        a = np.take(out, i0, axis=axis)
-        b = np.take(out, i1, axis=axis)
+        i0, t = _axis_weights(n, factor)
         shape = [1, 1, 1]
         shape[axis] = -1
-        out = a + (b - a) * t.reshape(shape)
+        a = np.take(out, i0, axis=axis)
+        if n == 1:  # a single sample (i1 = i0 = 0): a + (a − a)·t, as the general formula gives
+            out = a + (a - a) * t.reshape(shape)
+            continue
+        # b − a with b the sample after a (i1 = i0 + 1 always): the coarse differences, taken like a (the same
+        # subtractions, done once per coarse pair instead of once per fine cell); then a + (b − a)·t in place
+        lo, hi = [slice(None)] * 3, [slice(None)] * 3
+        lo[axis], hi[axis] = slice(0, -1), slice(1, None)
+        d = np.take(out[tuple(hi)] - out[tuple(lo)], i0, axis=axis)
+        d *= t.reshape(shape)
+        d += a
+        out = d
     return out
 
 
-_AXIS_CACHE: dict[tuple[int, int], tuple[NDArray[np.intp], NDArray[np.intp], F32]] = {}
+_AXIS_CACHE: dict[tuple[int, int], tuple[NDArray[np.intp], F32]] = {}
 
 
-def _axis_weights(n: int, factor: int) -> tuple[NDArray[np.intp], NDArray[np.intp], F32]:
+def _axis_weights(n: int, factor: int) -> tuple[NDArray[np.intp], F32]:
+    """Per fine cell along one axis: the coarse sample below it (clamped to [0, n − 2], so the one above is always
+    i0 + 1) and the lerp weight t."""
     key = (n, factor)
     if key not in _AXIS_CACHE:
         pos = (np.arange(n * factor) + 0.5) / factor - 0.5
         pos = np.clip(pos, 0.0, n - 1.0)
         i0 = np.minimum(np.floor(pos).astype(np.intp), max(n - 2, 0))
-        i1 = np.minimum(i0 + 1, n - 1)
-        _AXIS_CACHE[key] = (i0, i1, (pos - i0).astype(np.float32))
+        _AXIS_CACHE[key] = (i0, (pos - i0).astype(np.float32))
     return _AXIS_CACHE[key]
 
 
