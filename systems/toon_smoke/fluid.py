@@ -186,15 +186,37 @@ def vorticity_force(u: F32, v: F32, w: F32, h: float, epsilon: float) -> tuple[F
         out *= inv_h
         return out
 
-    wx = d(wc, 1) - d(vc, 2)
-    wy = d(uc, 2) - d(wc, 0)
-    wz = d(vc, 0) - d(uc, 1)
-    mag = np.sqrt(wx * wx + wy * wy + wz * wz)
+    # The same operations in the same order as the plain expressions (noted), in place on a few buffers.
+    wx = d(wc, 1)
+    wx -= d(vc, 2)  # ω = ∇ × u
+    wy = d(uc, 2)
+    wy -= d(wc, 0)
+    wz = d(vc, 0)
+    wz -= d(uc, 1)
+    scratch = np.empty_like(wx)
+    mag = _length(wx, wy, wz, scratch)  # |ω| = sqrt(wx·wx + wy·wy + wz·wz)
     nx, ny, nz = d(mag, 0), d(mag, 1), d(mag, 2)
-    norm = np.sqrt(nx * nx + ny * ny + nz * nz) + np.float32(1e-6)
-    scale = np.float32(epsilon * h) / norm
-    nx, ny, nz = nx * scale, ny * scale, nz * scale
-    return ny * wz - nz * wy, nz * wx - nx * wz, nx * wy - ny * wx
+    norm = _length(nx, ny, nz, mag)  # |∇|ω|| (mag is not needed any more)
+    norm += np.float32(1e-6)
+    scale = np.divide(np.float32(epsilon * h), norm, out=norm)  # N = ∇|ω| / |∇|ω||, times ε h
+    nx *= scale
+    ny *= scale
+    nz *= scale
+    fx = np.multiply(ny, wz)  # N × ω = (ny wz − nz wy, nz wx − nx wz, nx wy − ny wx)
+    fx -= np.multiply(nz, wy, out=scratch)
+    fy = np.multiply(nz, wx)
+    fy -= np.multiply(nx, wz, out=scratch)
+    fz = np.multiply(nx, wy)
+    fz -= np.multiply(ny, wx, out=scratch)
+    return fx, fy, fz
+
+
+def _length(x: F32, y: F32, z: F32, out: F32) -> F32:
+    """sqrt(x·x + y·y + z·z) per cell into ``out`` (summed left to right, as the plain expression)."""
+    np.multiply(x, x, out=out)
+    out += y * y
+    out += z * z
+    return np.sqrt(out, out=out)
 
 
 def add_cell_force(u: F32, v: F32, w: F32, force: tuple[F32 | None, F32 | None, F32 | None], dt: float) -> None:

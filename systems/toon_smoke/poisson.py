@@ -84,11 +84,17 @@ class _FlatLevel:
     r_span: F32 = field(init=False)
     x_neighbours: tuple[F32, ...] = field(init=False)  # x shifted by each offset, over the span
     x_children: F32 | None = field(init=False)  # x's interior as (nx/2, 2, ny/2, 2, nz/2, 2), for the prolongation
+    x_interior: F32 = field(init=False)  # the (nx, ny, nz) views of x, b and r (see :meth:`interior`), made once
+    b_interior: F32 = field(init=False)
+    r_interior: F32 = field(init=False)
+    x_parents: F32 = field(init=False)  # x's interior as (nx, 1, ny, 1, nz, 1): a coarse level's prolongation source
 
     def __post_init__(self) -> None:
         lo, hi = self.span.start, self.span.stop
         self.x_span, self.b_span, self.r_span = self.x[self.span], self.b[self.span], self.r[self.span]
         self.x_neighbours = tuple(self.x[lo + o:hi + o] for o in self.offsets)
+        self.x_interior, self.b_interior, self.r_interior = (self.interior(v) for v in (self.x, self.b, self.r))
+        self.x_parents = self.x_interior[:, None, :, None, :, None]
         nx, ny, nz = (n - 2 for n in self.padded_shape)
         self.x_children = None
         if nx % 2 == 0 and ny % 2 == 0 and nz % 2 == 0:
@@ -271,13 +277,13 @@ def _neighbour_sum(flat: _FlatLevel) -> F32:
 def apply_operator(level: Level, phi: F32) -> F32:
     """M φ = diag·φ − Σ_f A_f φ_nb (zero on inactive cells), for a compact (nx, ny, nz) field."""
     flat = level.flat
-    flat.interior(flat.x)[...] = phi
+    flat.x_interior[...] = phi
     out = flat.r_span
     np.multiply(flat.diag, flat.x_span, out=out)
     out -= _neighbour_sum(flat)
     if flat.coefficients is None:  # the plain sum is not zero on inactive cells; A·φ_nb would have been
         np.copyto(out, np.float32(0.0), where=flat.inactive)
-    return flat.interior(flat.r).copy()
+    return flat.r_interior.copy()
 
 
 def _half_sweep(flat: _FlatLevel, keep: F32, scale: F32) -> None:
@@ -294,10 +300,10 @@ def _half_sweep(flat: _FlatLevel, keep: F32, scale: F32) -> None:
 def _restrict_into(fine: _FlatLevel, coarse: _FlatLevel) -> None:
     """Coarse right-hand side from the fine residual ``fine.r``: 4 × the mean of the 8 children (the (2h)²/h²
     scaling of the 7-point Laplacian), written into the coarse level's ``b``."""
-    r = fine.interior(fine.r)
+    r = fine.r_interior
     s = r[0::2] + r[1::2]
     s = s[:, 0::2] + s[:, 1::2]
-    out = coarse.interior(coarse.b)
+    out = coarse.b_interior
     np.add(s[:, :, 0::2], s[:, :, 1::2], out=out)
     out *= np.float32(0.5)
 
@@ -327,7 +333,7 @@ def _v_cycle(levels: list[Level], depth: int) -> None:
     _restrict_into(flat, coarse)
     _v_cycle(levels, depth + 1)
     # piecewise-constant prolongation: each coarse value added to its 8 children (adjoint of the restriction)
-    flat.x_children += coarse.interior(coarse.x)[:, None, :, None, :, None]
+    flat.x_children += coarse.x_parents
     np.copyto(x, np.float32(0.0), where=flat.inactive)
     for _ in range(_SMOOTH_SWEEPS):
         _half_sweep(flat, flat.keep_black, flat.black_inv_diag)
@@ -339,9 +345,9 @@ def v_cycle(hierarchy: PoissonHierarchy, b: F32) -> F32:
     Gauss–Seidel pre- and post-smoothing, the residual restricted to the next level down, a dense solve on the
     coarsest level, the correction prolonged back."""
     flat = hierarchy.levels[0].flat
-    flat.interior(flat.b)[...] = b
+    flat.b_interior[...] = b
     _v_cycle(hierarchy.levels, 0)
-    return flat.interior(flat.x).copy()
+    return flat.x_interior.copy()
 
 
 def _dot(a: F32, b: F32) -> float:
