@@ -316,7 +316,8 @@ class DustDevilParticles(RenderFeature):
             self.renderer.framebuffer(coverage).use()  # not the view's: its depth is sampled here
             scene_depth = pc.get(view.depth)
             compare = scene_depth.compare_func
-            scene_depth.compare_func = ""  # read raw depth values
+            if compare:  # the engine's depth targets sample raw values already; no texture state change then
+                scene_depth.compare_func = ""
             scene_depth.use(0)
             coverage.bind_to_image(0, read=True, write=True, format=GL_R32UI)
             uniforms = dict(view_proj=view.view_proj.T.copy(), sub_particles=devil.sub_particles,
@@ -336,7 +337,8 @@ class DustDevilParticles(RenderFeature):
                            instances=devil.repeats * devil.sub_particles)
                 ctx.disable(moderngl.RASTERIZER_DISCARD)
             ctx.memory_barrier()  # the resolve reads the words through image loads
-            scene_depth.compare_func = compare
+            if compare:
+                scene_depth.compare_func = compare
 
         graph.add_pass(f"{prefix}.pbvr_accumulate.{view.name}", accumulate_setup, accumulate)
 
