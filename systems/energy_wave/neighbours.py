@@ -25,6 +25,7 @@ _PRIMES = np.array([73856093, 19349663, 83492791], dtype=np.int64)
 _STEPS = np.array([-1, 0, 1], dtype=np.int64)  # cell offsets along each axis: 3 x 3 x 3 neighbouring cells
 _OFFSETS = np.arange(27, dtype=np.int64)  # the 27 cells around a cell, 9·ix + 3·iy + iz
 _BITS = np.left_shift(1, _OFFSETS)  # their bits in a mask
+_BITS_F = _BITS.astype(np.float64)
 _SAME_POINT = 1e-18  # squared distance under which a neighbour counts as "at the same position"
 _GOLDEN = 0.6180339887498949  # low-discrepancy phases of the sampled buckets
 _BLOCK_SLOTS = 16384  # (sample, pair) slots per block: 64 KiB per float64 work array, the block stays in L2
@@ -126,8 +127,7 @@ class SpatialHash:
             order = np.argsort(keys, kind="stable")
             table = slice(int(self.offsets[g]), int(self.offsets[g] + self.tables[g]))
             self.counts[table] = np.bincount(keys, minlength=int(self.tables[g]))
-            for axis in range(3):  # loop over the three axes
-                np.take(group[:, axis], order, out=self.xyz[axis, base: base + len(group)])
+            self.xyz[:, base: base + len(group)] = np.take(group, order, axis=0).T  # rows at once, then transposed
             base += len(group)
         self.starts = np.cumsum(self.counts, out=_WORK.table("starts", len(self.counts), np.int64))
         self.starts -= self.counts
@@ -237,7 +237,7 @@ def _near_bits(fraction: F64, magnitude: F64) -> I64:
     d2 = gaps[0][:, None, None, :] + gaps[1][None, :, None, :] + gaps[2][None, None, :, :]
     near = d2.reshape(27, len(fraction)) <= 1.0 + 1e-6
     near[:, magnitude > 1e9] = True
-    return _BITS @ near
+    return (_BITS_F @ near).astype(np.int64)  # a float product (BLAS; exact below 2**53): numpy's integer one is slow
 
 
 class _Buckets(NamedTuple):
@@ -338,7 +338,10 @@ def grouped_repulsion(groups: list[tuple[F64, F64, float, float]], per_bucket_li
     if not np.isscalar(reach):
         reach = reach[order]
     point = _WORK.table("point", 3 * len(order)).reshape(3, -1)
-    np.take(query.T, owner[order], axis=1, out=point)
+    query_xyz = np.ascontiguousarray(query.T)
+    pair_owner = owner[order]
+    for axis in range(3):  # loop over the three axes (1-d takes of contiguous rows are the fast ones)
+        np.take(query_xyz[axis], pair_owner, out=point[axis])
     sums = _WORK.table("sums", 3 * len(order)).reshape(3, -1)
     lo = 0
     while lo < len(order):  # loop over blocks of pairs (bounded work arrays), not over particles
@@ -348,7 +351,8 @@ def grouped_repulsion(groups: list[tuple[F64, F64, float, float]], per_bucket_li
                    sums[:, lo:hi])
         lo = hi
     by_pair = _WORK.table("by_pair", 3 * len(order)).reshape(3, -1)
-    by_pair[:, order] = sums
+    for axis in range(3):  # loop over the three axes
+        np.put(by_pair[axis], order, sums[axis])
     total = np.empty((len(query), 3))
     for axis in range(3):  # per query, its buckets summed in order
         total[:, axis] = np.bincount(owner, weights=by_pair[axis], minlength=len(query))

@@ -49,6 +49,23 @@ F64 = NDArray[np.float64]
 NEIGHBOUR_SAMPLE_LIMIT = 16  # per hashed cell: crowded cells are sampled (unbiased) so cost stays bounded
 _EPS = 1e-12
 _SIGN_AND_LOW = np.int8(-127)  # 0b10000001: the sign bit and the lowest bit of an int8 pattern code
+_ROW = np.dtype((np.void, 24))  # one (x, y, z) float64 row as a 24-byte record
+
+
+def _rows(array: F64) -> NDArray[np.void]:
+    """A C-contiguous (n, 3) float64 array seen as n 24-byte records (raises on any other layout)."""
+    return array.view(_ROW)[:, 0]
+
+
+def _take_rows(array: F64, rows: NDArray[np.int64]) -> F64:
+    """``array[rows]`` of an (n, 3) array: numpy's fancy row indexing is several times slower than np.take."""
+    return array.take(rows, axis=0)
+
+
+def _put_rows(array: F64, rows: NDArray[np.int64], values: F64) -> None:
+    """``array[rows] = values`` for a C-contiguous (n, 3) float64 array: one np.put of 24-byte records (the same
+    bytes, several times faster than fancy row assignment)."""
+    _rows(array).put(rows, _rows(np.ascontiguousarray(values, dtype=np.float64)))
 
 
 @dataclass
@@ -126,14 +143,16 @@ def sweep(p0: F64, p1: F64, colliders: list[ColliderEntry],
         rows = np.flatnonzero(candidate)
         if rows.size == 0:
             continue
-        hit, t, normal = entry.collider.ray_cast(p0[rows], p1[rows] - p0[rows], entry.transform, max_t=1.0)
+        origin = _take_rows(p0, rows)
+        hit, t, normal = entry.collider.ray_cast(origin, _take_rows(p1, rows) - origin, entry.transform, max_t=1.0)
         if entry.collider.is_trigger:
             enter = hit & (t > 0.0)
             trigger_hits.append((index, rows[enter], t[enter]))
             continue
         better = hit & (t < best_t[rows])
         rows = rows[better]
-        best_t[rows], best_c[rows], best_n[rows] = t[better], index, normal[better]
+        best_t[rows], best_c[rows] = t[better], index
+        _put_rows(best_n, rows, _take_rows(normal, np.flatnonzero(better)))
     triggers = []
     for index, rows, t in trigger_hits:  # a trigger behind a solid hit in the same step is not reached
         keep = t <= best_t[rows]
@@ -290,14 +309,17 @@ _SCRATCH = _Scratch()
 def _remove_dead(buf: ParticleBuffer, dead: NDArray[np.bool_]) -> int:
     """Remove particles flagged ``dead`` (over the live range) by moving live tail particles into their slots."""
     n = buf.count
-    gone = np.flatnonzero(dead)
+    gone = dead.nonzero()[0]
     if gone.size == 0:
         return 0
     keep = n - gone.size
-    holes = gone[gone < keep]
-    movers = keep + np.flatnonzero(~dead[keep:n])
-    for array in buf.arrays():
-        array[holes] = array[movers]
+    holes = gone[: int(np.searchsorted(gone, keep))]  # ascending: the dead slots below the new count
+    if holes.size:  # as many live particles above the new count move down into them
+        movers = np.logical_not(dead[keep:n]).nonzero()[0]
+        movers += keep
+        for array in buf.arrays():  # loop over the particle arrays; (n, 3) ones moved as 24-byte records
+            flat = _rows(array) if array.ndim == 2 else array
+            flat.put(holes, flat.take(movers))
     buf.count = keep
     return int(gone.size)
 
@@ -466,7 +488,8 @@ def _splash(emitters: list[_Emitter], first: NDArray[np.int64], rows: NDArray[np
     circ_counts = np.diff(np.searchsorted(circ, first))
     unit = _per_row([e.cfg.equation_unit for e in emitters], circ_counts)
     per_frame = _per_row([FRAME / e.cfg.equation_unit for e in emitters], circ_counts)
-    w = np.concatenate([e.state.particles.velocity[e.beam[rows[first[i]: first[i + 1]]]] for i, e in enumerate(emitters)])
+    w = np.concatenate([_take_rows(e.state.particles.velocity, e.beam[rows[first[i]: first[i + 1]]])
+                        for i, e in enumerate(emitters)])
     drag = penalty_drag(depth[circ] / unit, normal[circ], w[circ] * per_frame[:, None],
                         _per_row([e.cfg.spring for e in emitters], circ_counts),
                         _per_row([e.cfg.damper for e in emitters], circ_counts))
@@ -484,7 +507,7 @@ def _splash(emitters: list[_Emitter], first: NDArray[np.int64], rows: NDArray[np
         lo = query.min(axis=0) - e.cfg.repulsion_radius  # the queries' box grown by the radius (neighbours.in_reach)
         hi = query.max(axis=0) + e.cfg.repulsion_radius
         settled = in_box(buf.position[: buf.count], lo, hi, buf.pattern[: buf.count] >= 0)
-        neighbours.append(np.concatenate([buf.position[settled], own[in_box(own, lo, hi)]]))
+        neighbours.append(np.concatenate([_take_rows(buf.position, settled), _take_rows(own, in_box(own, lo, hi))]))
     slots = np.concatenate([e.beam[rows[first[i]: first[i + 1]]] for i, e in enumerate(emitters)])
     return _Splashes(first, slots, point, normal, pattern, lifetime, c, control, offset, circ, drag, neighbours, w)
 
@@ -516,11 +539,11 @@ def _land(state: EnergyWaveState, splash: _Splashes, acceleration: F64, own: sli
     rows = splash.rows[own]
     point = splash.point[own]
     acceleration = acceleration[own]
-    buf.position[rows] = point
-    buf.hit_point[rows] = point
-    buf.velocity[rows] = acceleration * FRAME  # A acts during the collision frame; irregular ones start at rest
-    buf.acceleration[rows] = acceleration
-    buf.target_offset[rows] = splash.offset[own]
+    _put_rows(buf.position, rows, point)
+    _put_rows(buf.hit_point, rows, point)
+    _put_rows(buf.velocity, rows, acceleration * FRAME)  # A acts during the collision frame; irregular: at rest
+    _put_rows(buf.acceleration, rows, acceleration)
+    _put_rows(buf.target_offset, rows, splash.offset[own])
     buf.age[rows] = 0.0
     buf.lifetime[rows] = splash.lifetime[own]
     buf.pattern[rows] = splash.pattern[own]
@@ -541,13 +564,13 @@ def _send_events(world: World, emitter: int, colliders: list[ColliderEntry], whi
             sel = which == index
             p, n, v = point[sel], normal[sel], velocity[sel]
         count = len(p)
-        mean_point = p.mean(axis=0)
-        mean_normal = n.sum(axis=0)
-        mean_normal = mean_normal / max(float(np.linalg.norm(mean_normal)), _EPS)
-        impulse = mass * v.sum(axis=0)
+        mean_point = np.add.reduce(p, axis=0) / count  # what p.mean(axis=0) computes, without its wrapper
+        mean_normal = np.add.reduce(n, axis=0)
+        mean_normal = mean_normal / max(math.sqrt(mean_normal.dot(mean_normal)), _EPS)  # np.linalg.norm's sum
+        impulse = mass * np.add.reduce(v, axis=0)
         energy = 0.5 * mass * float(np.einsum("ij,ij->", v, v))
         target = colliders[int(index)].entity
-        at, i, nn = tuple(map(float, mean_point)), tuple(map(float, impulse)), tuple(map(float, mean_normal))
+        at, i, nn = tuple(mean_point.tolist()), tuple(impulse.tolist()), tuple(mean_normal.tolist())
         if not trigger:
             world.events.send(Impact(target, at, i, source=emitter, kind="energy_wave"))
         world.events.send(EnergyWaveHit(emitter, target, at, nn, i, energy, count, trigger))
@@ -579,7 +602,7 @@ def _advance(e: _Emitter, dt: float) -> None:
     buf.age[:n] += dt
     _steer_irregular(e.cfg, e.state, e.transform, dt)
     e.beam = np.flatnonzero(buf.pattern[:n] == BEAM)
-    e.start = buf.position[e.beam]  # a copy (fancy indexing)
+    e.start = _take_rows(buf.position, e.beam)  # a copy
     buf.position[:n] += np.multiply(buf.velocity[:n], dt, out=_SCRATCH.get("move", (n, 3)))
 
 
@@ -606,7 +629,7 @@ def _collide(world: World, emitters: list[_Emitter]) -> None:
         return
     bounds = np.cumsum([0] + [e.beam.size for e in flying])
     start = np.concatenate([e.start for e in flying])
-    end = np.concatenate([e.state.particles.position[e.beam] for e in flying])
+    end = np.concatenate([_take_rows(e.state.particles.position, e.beam) for e in flying])
     owner = np.repeat(np.arange(len(flying)), np.diff(bounds))
     allowed = np.array([hittable(colliders, e.entity, e.cfg.collision_layers) for e in flying])[owner]
     result = sweep(start, end, colliders, allowed)
@@ -615,7 +638,8 @@ def _collide(world: World, emitters: list[_Emitter]) -> None:
     first = np.searchsorted(hit, bounds)  # flying emitter i's hits: hit[first[i]:first[i + 1]]
     splash = None
     if hit.size:
-        point = start[hit] + result.t[hit, None] * (end[hit] - start[hit])
+        start_hit = _take_rows(start, hit)
+        point = start_hit + result.t[hit, None] * (_take_rows(end, hit) - start_hit)
         splash = _splash(flying, first, hit - bounds[owner[hit]], point, result.normal[hit], depth)
         acceleration = _accelerations(splash, _repulsions(flying, splash))
     for i, e in enumerate(flying):  # loop over emitters, in entity order: events in a fixed order
