@@ -28,23 +28,44 @@ class Trilinear:
     shape: tuple[int, ...]  # the shape of the points (of each result)
 
     def gather(self, values: F32) -> F32:
-        """Interpolate ``values`` (the grid shape given to :func:`trilinear_weights`) at the points."""
-        return self._blend(values.ravel().take(self.corners)).reshape(self.shape)
+        """Interpolate ``values`` (the grid shape given to :func:`trilinear_weights`) at the points (float32 values
+        and weights blend in place in the gathered corners)."""
+        c = values.ravel().take(self.corners)
+        if c.dtype == np.float32 and self.fx.dtype == np.float32:
+            return _blend_in_place(c, self.fx, self.fy, self.fz).reshape(self.shape)
+        return _blend(c, self.fx, self.fy, self.fz).reshape(self.shape)
 
     def gather_many(self, fields: list[F32]) -> list[F32]:
         """:meth:`gather` for several fields of the same grid (the corners and weights computed once; one gather
         per field is cheaper than one gather from the fields stacked)."""
         return [self.gather(f) for f in fields]
 
-    def _blend(self, c: F32) -> F32:
-        """Lerp the corner values (…, 8, N) along z, then y, then x: the same operations, in the same order, as
-        c00 = v000 + (v001 − v000)·fz, …, c0 = c00 + (c01 − c00)·fy, …, c0 + (c1 − c0)·fx."""
-        lo, hi = c[..., 0::2, :], c[..., 1::2, :]
-        c = lo + (hi - lo) * self.fz
-        lo, hi = c[..., 0::2, :], c[..., 1::2, :]
-        c = lo + (hi - lo) * self.fy
-        lo, hi = c[..., 0, :], c[..., 1, :]
-        return lo + (hi - lo) * self.fx
+
+def _blend(c: NDArray, fx: NDArray, fy: NDArray, fz: NDArray) -> NDArray:
+    """Lerp the corner values (…, 8, N) along z, then y, then x: the same operations, in the same order, as
+    c00 = v000 + (v001 − v000)·fz, …, c0 = c00 + (c01 − c00)·fy, …, c0 + (c1 − c0)·fx."""
+    lo, hi = c[..., 0::2, :], c[..., 1::2, :]
+    c = lo + (hi - lo) * fz
+    lo, hi = c[..., 0::2, :], c[..., 1::2, :]
+    c = lo + (hi - lo) * fy
+    lo, hi = c[..., 0, :], c[..., 1, :]
+    return lo + (hi - lo) * fx
+
+
+def _blend_in_place(c: F32, fx: F32, fy: F32, fz: F32) -> F32:
+    """:func:`_blend` of a float32 (8, N) buffer with float32 weights, in place on the buffer (it is scratch):
+    hi −= lo, hi ·= f, hi += lo is lo + (hi − lo)·f with the same roundings (addition commutes bit for bit).
+    Returns a new (N,) array."""
+    for f in (fz, fy):  # the z, then the y lerps
+        lo, hi = c[0::2], c[1::2]
+        hi -= lo
+        hi *= f
+        hi += lo
+        c = hi
+    lo, hi = c[0], c[1]
+    hi -= lo
+    hi *= fx
+    return np.add(hi, lo)
 
 
 _BOUNDS: dict[tuple[int, int, int], tuple] = {}
@@ -75,7 +96,8 @@ def trilinear_points(shape: tuple[int, int, int], points: NDArray) -> Trilinear:
     np.minimum(c, upper32 if float32 else upper64, out=c)
     i = c.astype(np.intp)
     np.minimum(i, last, out=i)
-    f = c - i.astype(np.float32 if float32 else np.float64)
+    fractions = np.float32 if float32 else np.float64
+    f = np.subtract(c, i.astype(fractions), out=c if c.dtype == fractions else None)  # in c's buffer
     i *= strides
     base = i[0] + i[1]
     base += i[2]
@@ -134,9 +156,8 @@ class MacSampler:
         i *= strides
         base = i[:, 0] + i[:, 1]
         base += i[:, 2]
-        blend = Trilinear(base[:, None, :] + corners, f[:, 0], f[:, 1, None, :], f[:, 2, None, :], points.shape[1:])
-        out = blend._blend(self.values.take(blend.corners))
-        return tuple(out[k].reshape(blend.shape) for k in range(3))
+        out = _blend(self.values.take(base[:, None, :] + corners), f[:, 0], f[:, 1, None, :], f[:, 2, None, :])
+        return tuple(out[k].reshape(points.shape[1:]) for k in range(3))
 
 
 _MAC_TABLES: dict[tuple, tuple] = {}
