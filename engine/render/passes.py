@@ -30,15 +30,17 @@ def builtin_features():
     return [SkyFeature, TerrainFeature, MeshFeature, HudFeature]
 
 
-def set_uniforms(prog: moderngl.Program, **values: Any) -> None:
-    """Set the uniforms that the program really uses (the compiler drops unused ones)."""
+def set_uniforms(prog: moderngl.Program | moderngl.ComputeShader, **values: Any) -> None:
+    """Set the uniforms that the program really uses (the compiler drops unused ones).  One dictionary look-up
+    a name: ``name in prog`` walks the program's members (~0.1 ms a call for the lit mesh shader's uniforms)."""
     for name, value in values.items():
-        if name in prog:
-            member = prog[name]
-            if isinstance(value, np.ndarray):
-                member.write(value.astype(np.float32).tobytes() if value.dtype != np.int32 else value.tobytes())
-            else:
-                member.value = value
+        member = prog.get(name, None)
+        if member is None:
+            continue
+        if isinstance(value, np.ndarray):
+            member.write(value.astype(np.float32).tobytes() if value.dtype != np.int32 else value.tobytes())
+        else:
+            member.value = value
 
 
 def display_to_hdr(display: Any, exposure: float) -> np.ndarray:

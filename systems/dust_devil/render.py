@@ -43,7 +43,7 @@ from components.dust_devil import DustDevilConfig, DustDevilState
 from engine.render.feature import OPAQUE, TRANSPARENT, RenderFeature, View
 from engine.render.graph import TextureDesc
 from engine.render.passes import SHADERS as ENGINE_SHADERS
-from engine.render.passes import lighting_uniforms, opaque_setup, primitive
+from engine.render.passes import lighting_uniforms, opaque_setup, primitive, set_uniforms
 from engine.render.renderer import shader_source
 from engine.spatial import Transform
 from systems.dust_devil.simulate import marker_points, world_positions
@@ -84,20 +84,6 @@ def extract_devils(world) -> list[DevilFrame]:
 GL_R32UI = 0x8236  # the coverage words: an r32f graph texture bound as an r32ui image (the same 32 bits)
 MAX_SCATTER_REPEATS = 64  # two coverage words per pixel
 COMPUTE_GROUP = 64  # invocations per work group of pbvr_scatter.comp
-
-
-def set_uniforms(program: moderngl.Program | moderngl.ComputeShader, **values: Any) -> None:
-    """Set the uniforms that the program really uses (the compiler drops unused ones): the engine's
-    ``set_uniforms``, for compute shaders too, and with one dictionary look-up a name (``name in program``
-    walks the program's members: ~0.1 ms a call for the lit mesh shader's uniforms)."""
-    for name, value in values.items():
-        member = program.get(name, None)
-        if member is None:
-            continue
-        if isinstance(value, np.ndarray):
-            member.write(value.tobytes() if value.dtype == np.int32 else value.astype(np.float32).tobytes())
-        else:
-            member.value = value
 
 
 def slab_depth(r: int, repeats: int) -> float:

@@ -34,6 +34,7 @@ import numpy as np
 
 from engine.render.feature import TRANSPARENT, RenderFeature, View
 from engine.render.graph import TextureDesc
+from engine.render.passes import set_uniforms
 
 from .extract import BAR, RECORD_FLOATS, SINGLE, TRAIL, FrameData, extract_frame
 from .simulate import bar_sizes, trail_sizes
@@ -138,12 +139,6 @@ def pass_rects(bounds: UV, particles: tuple[int, int], glow_size: tuple[int, int
     return dict(composite=composite, blur_y=blur_y, blur_x=blur_x, particles=cleared)
 
 
-def _set(prog: moderngl.Program, **values) -> None:
-    for name, value in values.items():
-        if name in prog:
-            prog[name].value = value
-
-
 class EnergyWaveFeature(RenderFeature):
     """Draws every EnergyWaveEmitter's particles (section 3.4 of seeds/000)."""
 
@@ -217,14 +212,14 @@ class EnergyWaveFeature(RenderFeature):
         prog = vao.program
         self._records.use(0)
         view_m = view.view.astype(np.float64)
-        _set(prog, records=0, records_per_row=RECORDS_PER_ROW,
+        set_uniforms(prog, records=0, records_per_row=RECORDS_PER_ROW,
              camera_right=tuple(map(float, view_m[0, :3])), camera_up=tuple(map(float, view_m[1, :3])))
         prog["view_proj"].write(view.view_proj.T.astype(np.float32).tobytes())
         for emitter in data.emitters:
             cfg = emitter.config
             if cfg.intensity <= 0.0:
                 continue
-            _set(prog, size=cfg.particle_size, spacing=cfg.bar_spacing * cfg.particle_size,
+            set_uniforms(prog, size=cfg.particle_size, spacing=cfg.bar_spacing * cfg.particle_size,
                  roundness=cfg.splash_roundness, trail_end=cfg.trail_end_scale, color=tuple(cfg.color),
                  core_color=tuple(cfg.core_color), intensity=cfg.intensity)
             first = emitter.first
@@ -232,7 +227,7 @@ class EnergyWaveFeature(RenderFeature):
             for group, mode, sprites in groups:  # three draws per emitter, whatever M and N
                 count = emitter.counts[group]
                 if count:
-                    _set(prog, first=first, mode=mode, sprites=sprites)
+                    set_uniforms(prog, first=first, mode=mode, sprites=sprites)
                     vao.render(moderngl.TRIANGLES, vertices=len(QUAD_INDICES) * count * sprites)
                 first += count
 
@@ -272,7 +267,7 @@ class EnergyWaveFeature(RenderFeature):
             try:
                 ctx.depth_func = "1"  # colour 0 and the view's depth, in the rectangle only
                 prepare = self._fullscreen_vao("depth_copy")
-                _set(prepare.program, scene_depth=2, depth_scale=float(PARTICLE_DOWNSCALE))
+                set_uniforms(prepare.program, scene_depth=2, depth_scale=float(PARTICLE_DOWNSCALE))
                 prepare.render(moderngl.TRIANGLES, vertices=3)
                 ctx.depth_func = "<="  # the old in-shader test kept fragments with z <= scene depth
                 fbo.depth_mask = False
@@ -303,7 +298,7 @@ class EnergyWaveFeature(RenderFeature):
                 pc.get(h[src_key]).use(0)
                 step = [0.0, 0.0]
                 step[axis] = (radius / 4.0) / glow_size[axis]
-                _set(vao.program, source=0, step_uv=tuple(step))
+                set_uniforms(vao.program, source=0, step_uv=tuple(step))
                 try:
                     vao.render(moderngl.TRIANGLES, vertices=3)
                 finally:
@@ -328,7 +323,7 @@ class EnergyWaveFeature(RenderFeature):
                 vao = self._fullscreen_vao("composite")
                 pc.get(h["particles"]).use(0)
                 pc.get(h["blur_y"] if glow > 0.0 else h["particles"]).use(1)
-                _set(vao.program, particles=0, glow=1, glow_strength=float(glow))
+                set_uniforms(vao.program, particles=0, glow=1, glow_strength=float(glow))
                 vao.render(moderngl.TRIANGLES, vertices=3)
             finally:
                 fbo.scissor = None
