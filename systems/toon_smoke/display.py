@@ -171,7 +171,9 @@ def extract_isosurface(density: F32, iso: float, cell: float, origin: NDArray[np
         lo, hi = max(int(rows[0]) - 1, 0), min(int(rows[-1]) + 2, density.shape[axis])
         start.append(lo)
         crop.append(slice(lo, hi))
-    padded = np.pad(density[tuple(crop)], 1)
+    core = density[tuple(crop)]
+    padded = np.zeros(tuple(n + 2 for n in core.shape), density.dtype)  # = np.pad(core, 1), without its wrapper
+    padded[1:-1, 1:-1, 1:-1] = core
     verts, faces, normals, _ = measure.marching_cubes(padded, level=iso, spacing=(cell, cell, cell),
                                                       gradient_direction="descent", method="lewiner")
     verts = verts + (np.asarray(origin, np.float64) + (np.asarray(start) - 1) * cell)

@@ -248,7 +248,7 @@ def project(u: F32, v: F32, w: F32, h: float, hierarchy: poisson.PoissonHierarch
     before = divergence(u, v, w, h)
     if target is not None:
         before -= target
-    div_before = float(np.abs(before[fluid]).max()) if fluid.any() else 0.0
+    div_before = _max_abs(before, fluid)
     phi, report = poisson.solve(hierarchy, -before * np.float32(h), pressure, tolerance, max_iterations)
     ax, ay, az = level.faces
     u[1:-1] -= level.ax * (phi[1:] - phi[:-1])
@@ -263,5 +263,10 @@ def project(u: F32, v: F32, w: F32, h: float, hierarchy: poisson.PoissonHierarch
     after = divergence(u, v, w, h)
     if target is not None:
         after -= target
-    div_after = float(np.abs(after[fluid]).max()) if fluid.any() else 0.0
+    div_after = _max_abs(after, fluid)
     return phi, div_before, div_after, report.iterations
+
+
+def _max_abs(values: F32, where: NDArray[np.bool_]) -> float:
+    """max |values| over the cells of ``where`` (0 when there are none), without copying them out first."""
+    return float(np.max(np.abs(values), where=where, initial=0.0))
