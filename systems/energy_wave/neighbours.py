@@ -33,8 +33,11 @@ _BLOCK_SLOTS = 16384  # (sample, pair) slots per block: 64 KiB per float64 work 
 
 def _hash(cells: I64, table: int | I64) -> I64:
     """Cell (ix, iy, iz) -> bucket in [0, table): (ix·p1 xor iy·p2 xor iz·p3) mod table (table a power of 2)."""
-    h = (cells[..., 0] * _PRIMES[0]) ^ (cells[..., 1] * _PRIMES[1]) ^ (cells[..., 2] * _PRIMES[2])
-    return h & (table - 1)
+    h = cells[..., 0] * _PRIMES[0]
+    h ^= cells[..., 1] * _PRIMES[1]
+    h ^= cells[..., 2] * _PRIMES[2]
+    h &= table - 1
+    return h
 
 
 def _hash_around(cells: I64, mask: I64) -> I64:
@@ -121,10 +124,10 @@ class SpatialHash:
         self.xyz = _WORK.table("xyz", 3 * sum(sizes)).reshape(3, -1)
         base = 0
         for g, group in enumerate(points):  # loop over groups (emitters): each sorted on its own, in cache
-            keys = _hash(np.floor(group / self.cells[g]).astype(np.int64), int(self.tables[g]))
-            if self.tables[g] <= 1 << 16:
-                keys = keys.astype(np.uint16)  # numpy sorts 16-bit keys with a radix (counting) sort
-            order = np.argsort(keys, kind="stable")
+            scaled = np.divide(group, self.cells[g])
+            keys = _hash(np.floor(scaled, out=scaled).astype(np.int64), int(self.tables[g]))
+            # numpy sorts 16-bit keys with a radix (counting) sort
+            order = (keys.astype(np.uint16) if self.tables[g] <= 1 << 16 else keys).argsort(kind="stable")
             table = slice(int(self.offsets[g]), int(self.offsets[g] + self.tables[g]))
             self.counts[table] = np.bincount(keys, minlength=int(self.tables[g]))
             self.xyz[:, base: base + len(group)] = np.take(group, order, axis=0).T  # rows at once, then transposed
@@ -204,8 +207,8 @@ class SpatialHash:
 def _distinct_cells(cells: I64, groups: I64) -> tuple[I64, I64, I64]:
     """The distinct (group, cell) of the queries: their cells (u, 3) and groups (u,), ordered by group, and each
     query's index among them."""
-    lo = cells.min(axis=0)
-    span = cells.max(axis=0) - lo + 1
+    lo = np.minimum.reduce(cells, axis=0)
+    span = np.maximum.reduce(cells, axis=0) - lo + 1
     if float(np.prod(span, dtype=np.float64)) * (int(groups[-1]) + 1) < 2.0**62:  # one int64 key per (group, cell)
         key = (groups * span[0] + (cells[:, 0] - lo[0])) * span[1] + (cells[:, 1] - lo[1])
         key = key * span[2] + (cells[:, 2] - lo[2])

@@ -424,6 +424,7 @@ class _Splashes:
     control: NDArray[np.int8]
     offset: F64  # random offsets of the control points
     circular: NDArray[np.int64]  # which of them move circularly (eqs. 3.2–3.4), ascending
+    query: F64  # the hit points of the circular ones (the queries of eq. 3.3)
     drag: F64  # D (eq. 3.2) of the circular ones
     neighbours: list[F64]  # per emitter: positions that repel its circular ones (eq. 3.3)
     incoming: F64  # their beam velocities before the hit
@@ -484,39 +485,45 @@ def _splash(emitters: list[_Emitter], first: NDArray[np.int64], rows: NDArray[np
         offset[with_points] = _ball_points(np.concatenate(normals), np.concatenate(uniforms)) * \
             np.concatenate(radii)[:, None]
     # Circular: the drag D (eq. 3.2) now, in the paper's units (lengths in `equation_unit`, velocities per frame).
-    circ = np.flatnonzero(pattern % 2 == 0)
-    circ_counts = np.diff(np.searchsorted(circ, first))
+    circ = ((pattern & 1) == 0).nonzero()[0]  # codes 0..7 here: even is circular (int8 % is slow)
+    bounds = np.searchsorted(circ, first)
+    circ_counts = np.diff(bounds)
     unit = _per_row([e.cfg.equation_unit for e in emitters], circ_counts)
     per_frame = _per_row([FRAME / e.cfg.equation_unit for e in emitters], circ_counts)
     w = np.concatenate([_take_rows(e.state.particles.velocity, e.beam[rows[first[i]: first[i + 1]]])
                         for i, e in enumerate(emitters)])
-    drag = penalty_drag(depth[circ] / unit, normal[circ], w[circ] * per_frame[:, None],
+    drag = penalty_drag(depth.take(circ) / unit, _take_rows(normal, circ), _take_rows(w, circ) * per_frame[:, None],
                         _per_row([e.cfg.spring for e in emitters], circ_counts),
                         _per_row([e.cfg.damper for e in emitters], circ_counts))
     # Neighbours for R (eq. 3.3): every particle of the emitter already hit (its hits are still BEAM in the buffer)
     # and its hits this step, only those near the queries (the impact zone is small).
     neighbours = []
-    bounds = np.searchsorted(circ, first)
+    query = _take_rows(point, circ)
+    querying = np.flatnonzero(circ_counts)  # each emitter's queries' box (neighbours.in_reach), all at once
+    lows = np.minimum.reduceat(query, bounds[querying]) if querying.size else query
+    highs = np.maximum.reduceat(query, bounds[querying]) if querying.size else query
+    k = 0
     for i, e in enumerate(emitters):  # loop over emitters: each one's particles repel only its own
         if bounds[i] == bounds[i + 1]:
             neighbours.append(np.zeros((0, 3)))
             continue
         buf = e.state.particles
         own = point[first[i]: first[i + 1]]
-        query = point[circ[bounds[i]: bounds[i + 1]]]
-        lo = query.min(axis=0) - e.cfg.repulsion_radius  # the queries' box grown by the radius (neighbours.in_reach)
-        hi = query.max(axis=0) + e.cfg.repulsion_radius
+        lo = lows[k] - e.cfg.repulsion_radius  # the box grown by the radius
+        hi = highs[k] + e.cfg.repulsion_radius
+        k += 1
         settled = in_box(buf.position[: buf.count], lo, hi, buf.pattern[: buf.count] >= 0)
         neighbours.append(np.concatenate([_take_rows(buf.position, settled), _take_rows(own, in_box(own, lo, hi))]))
     slots = np.concatenate([e.beam[rows[first[i]: first[i + 1]]] for i, e in enumerate(emitters)])
-    return _Splashes(first, slots, point, normal, pattern, lifetime, c, control, offset, circ, drag, neighbours, w)
+    return _Splashes(first, slots, point, normal, pattern, lifetime, c, control, offset, circ, query, drag, neighbours,
+                     w)
 
 
 def _repulsions(emitters: list[_Emitter], splash: _Splashes) -> F64:
     """R (eq. 3.3) of every circular particle from its own emitter's neighbours, all emitters at once, in the
     order of ``splash.circular``."""
     bounds = np.searchsorted(splash.circular, splash.first)
-    groups = [(splash.point[splash.circular[bounds[i]: bounds[i + 1]]], splash.neighbours[i], e.cfg.repulsion_radius,
+    groups = [(splash.query[bounds[i]: bounds[i + 1]], splash.neighbours[i], e.cfg.repulsion_radius,
                e.cfg.repulsion * e.cfg.equation_unit) for i, e in enumerate(emitters)]
     found = grouped_repulsion(groups, NEIGHBOUR_SAMPLE_LIMIT)
     return np.concatenate(found) if found else np.zeros((0, 3))
@@ -527,8 +534,8 @@ def _accelerations(splash: _Splashes, repulsion: F64) -> F64:
     acceleration = np.zeros((len(splash.rows), 3))
     circ = splash.circular
     if circ.size:
-        acceleration[circ] = collision_acceleration(splash.drag, repulsion, splash.normal[circ],
-                                                    splash.magnitude[circ])
+        _put_rows(acceleration, circ, collision_acceleration(splash.drag, repulsion, _take_rows(splash.normal, circ),
+                                                             splash.magnitude.take(circ)))
     return acceleration
 
 
