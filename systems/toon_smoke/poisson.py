@@ -83,24 +83,20 @@ class _FlatLevel:
     b_span: F32 = field(init=False)
     r_span: F32 = field(init=False)
     x_neighbours: tuple[F32, ...] = field(init=False)  # x shifted by each offset, over the span
-    x_children: F32 | None = field(init=False)  # x's interior as (nx/2, 2, ny/2, 2, nz/2, 2), for the prolongation
+    parent_index: NDArray[np.intp] | None = field(init=False)  # see below
     x_interior: F32 = field(init=False)  # the (nx, ny, nz) views of x, b and r (see :meth:`interior`), made once
     b_interior: F32 = field(init=False)
     r_interior: F32 = field(init=False)
-    x_parents: F32 = field(init=False)  # x's interior as (nx, 1, ny, 1, nz, 1): a coarse level's prolongation source
 
     def __post_init__(self) -> None:
         lo, hi = self.span.start, self.span.stop
         self.x_span, self.b_span, self.r_span = self.x[self.span], self.b[self.span], self.r[self.span]
         self.x_neighbours = tuple(self.x[lo + o:hi + o] for o in self.offsets)
         self.x_interior, self.b_interior, self.r_interior = (self.interior(v) for v in (self.x, self.b, self.r))
-        self.x_parents = self.x_interior[:, None, :, None, :, None]
         nx, ny, nz = (n - 2 for n in self.padded_shape)
-        self.x_children = None
+        self.parent_index = None
         if nx % 2 == 0 and ny % 2 == 0 and nz % 2 == 0:
-            children = self.interior(self.x).reshape(nx // 2, 2, ny // 2, 2, nz // 2, 2)
-            assert np.shares_memory(children, self.x)  # a view: the prolongation adds in place
-            self.x_children = children
+            self.parent_index = _parent_index(self.padded_shape)[self.span]
 
     def __deepcopy__(self, memo: dict) -> _FlatLevel:
         """Snapshots deep-copy the hierarchy: copy the vectors and rebuild the views into the copies (a plain deep
@@ -110,6 +106,18 @@ class _FlatLevel:
     def interior(self, vector: F32) -> F32:
         """The (nx, ny, nz) view of the real cells of a padded flat vector."""
         return vector.reshape(self.padded_shape)[1:-1, 1:-1, 1:-1]
+
+
+def _parent_index(padded_shape: tuple[int, int, int]) -> NDArray[np.intp]:
+    """For every entry of a padded flat vector of an even-sided level: the index of the cell's parent (the coarse
+    cell holding its 2×2×2 block) in the next level's padded flat vector, and 0 for ghosts (the coarse vector's
+    first entry, a ghost that is never written: always 0)."""
+    nx, ny, nz = (n - 2 for n in padded_shape)
+    coarse = (nx // 2 + 2, ny // 2 + 2, nz // 2 + 2)
+    parents = np.arange(coarse[0] * coarse[1] * coarse[2]).reshape(coarse)[1:-1, 1:-1, 1:-1]
+    index = np.zeros(padded_shape, np.intp)
+    index[1:-1, 1:-1, 1:-1] = parents.repeat(2, axis=0).repeat(2, axis=1).repeat(2, axis=2)
+    return index.reshape(-1)
 
 
 @dataclass
@@ -332,8 +340,9 @@ def _v_cycle(levels: list[Level], depth: int) -> None:
     coarse = levels[depth + 1].flat
     _restrict_into(flat, coarse)
     _v_cycle(levels, depth + 1)
-    # piecewise-constant prolongation: each coarse value added to its 8 children (adjoint of the restriction)
-    flat.x_children += coarse.x_parents
+    # piecewise-constant prolongation: each coarse value added to its 8 children (adjoint of the restriction), as
+    # one gather of each cell's parent (0 for ghosts) and one contiguous addition over the span
+    x += coarse.x.take(flat.parent_index)
     np.copyto(x, np.float32(0.0), where=flat.inactive)
     for _ in range(_SMOOTH_SWEEPS):
         _half_sweep(flat, flat.keep_black, flat.black_inv_diag)
