@@ -110,3 +110,35 @@ def test_groups_computed_together_equal_groups_computed_alone():
         for group, result in zip(groups, together):
             assert np.array_equal(result, grouped_repulsion([group], limit)[0])
     assert np.abs(together[0]).max() > 0.0
+
+
+def test_row_helpers_and_dead_removal_match_fancy_indexing():
+    """Rows gathered with take and written as 24-byte records, and dead particles replaced by the live ones above the
+    new count (or just dropped when they all sit there), give what numpy's fancy indexing gives, slot by slot."""
+    from components.energy_wave import ParticleBuffer
+    from systems.energy_wave.simulate import _put_rows, _remove_dead, _take_rows
+
+    rng = np.random.default_rng(3)
+    array = rng.standard_normal((50, 3))
+    rows = np.array([7, 3, 41, 0])
+    assert np.array_equal(_take_rows(array, rows), array[rows])
+    values = rng.standard_normal((4, 3))
+    expected = array.copy()
+    expected[rows] = values
+    _put_rows(array, rows, values)
+    assert np.array_equal(array, expected)
+    for dead_at in (np.array([2, 5, 29, 38]), np.array([36, 37, 38, 39])):  # holes to fill; only the tail dies
+        buf = ParticleBuffer(60)
+        buf.count = 40
+        for a in buf.arrays():
+            a[...] = rng.integers(0, 100, a.shape).astype(a.dtype)
+        before = [a[:40].copy() for a in buf.arrays()]
+        dead = np.zeros(40, dtype=bool)
+        dead[dead_at] = True
+        assert _remove_dead(buf, dead) == 4
+        assert buf.count == 36
+        source = np.arange(36)  # each slot below the new count keeps its particle, or takes the next live mover
+        kept = np.flatnonzero(~dead)
+        source[dead_at[dead_at < 36]] = kept[kept >= 36]
+        for old, new in zip(before, buf.arrays()):
+            assert np.array_equal(new[:36], old[source])
