@@ -114,11 +114,9 @@ def _splat_group(flat: F32, shape: tuple[int, ...], origin: NDArray[np.intp], ce
     base = np.rint(c).astype(np.intp)
     frac = base.astype(np.float32) - c
     axis = directions.astype(np.float32)
-    t = axis @ offsets_t  # + f·û below: the sums of the two terms, in place (addition commutes bit for bit)
-    t += (frac * axis).sum(axis=1)[:, None]
+    t = (frac * axis).sum(axis=1)[:, None] + axis @ offsets_t
     # 2·(f·o) as (2f)·o: doubling is exact, so the product has the same bits
-    dist2 = (frac + frac) @ offsets_t
-    dist2 += (frac * frac).sum(axis=1)[:, None]
+    dist2 = (frac * frac).sum(axis=1)[:, None] + (frac + frac) @ offsets_t
     dist2 += offsets_sq
     inv_a2 = (1.0 / along ** 2).astype(np.float32)[:, None]
     inv_b2 = (1.0 / across ** 2).astype(np.float32)[:, None]
