@@ -25,7 +25,6 @@ _PRIMES = np.array([73856093, 19349663, 83492791], dtype=np.int64)
 _STEPS = np.array([-1, 0, 1], dtype=np.int64)  # cell offsets along each axis: 3 x 3 x 3 neighbouring cells
 _OFFSETS = np.arange(27, dtype=np.int64)  # the 27 cells around a cell, 9·ix + 3·iy + iz
 _BITS = np.left_shift(1, _OFFSETS)  # their bits in a mask
-_BITS_F = _BITS.astype(np.float64)
 _SAME_POINT = 1e-18  # squared distance under which a neighbour counts as "at the same position"
 _GOLDEN = 0.6180339887498949  # low-discrepancy phases of the sampled buckets
 _BLOCK_SLOTS = 16384  # (sample, pair) slots per block: 64 KiB per float64 work array, the block stays in L2
@@ -190,7 +189,7 @@ class SpatialHash:
         # after the phases and the sampling were decided, so the result is that of scanning them.
         near = mask[entry]
         near &= np.repeat(near_bits, reached)
-        near = np.flatnonzero(near.astype(bool))
+        near = near.nonzero()[0]
         entry = entry[near]
         owner = np.repeat(np.arange(len(query)), reached)[near]
         # Phase of a sampled pair: its serial number within its group (among all its pairs) times the golden
@@ -240,7 +239,7 @@ def _near_bits(fraction: F64, magnitude: F64) -> I64:
     d2 = gaps[0][:, None, None, :] + gaps[1][None, :, None, :] + gaps[2][None, None, :, :]
     near = d2.reshape(27, len(fraction)) <= 1.0 + 1e-6
     near[:, magnitude > 1e9] = True
-    return (_BITS_F @ near).astype(np.int64)  # a float product (BLAS; exact below 2**53): numpy's integer one is slow
+    return _BITS @ near
 
 
 class _Buckets(NamedTuple):
