@@ -477,13 +477,16 @@ def _splash(emitters: list[_Emitter], first: NDArray[np.int64], rows: NDArray[np
                 continue
             own = slice(int(first[i]), int(first[i + 1]))
             weights = np.array([cp.probability for cp in e.cfg.control_points])
-            cumulative = np.cumsum(weights) / weights.sum()
-            control[own] = np.minimum(np.searchsorted(cumulative, u[own, 4], side="right"), len(weights) - 1)
-            with_points.append(np.arange(own.start, own.stop))
-            radii.append(np.array([cp.spread for cp in e.cfg.control_points])[control[own]])
-        with_points = np.concatenate(with_points)
-        offset[with_points] = _ball_points(np.concatenate(normals), np.concatenate(uniforms)) * \
-            np.concatenate(radii)[:, None]
+            cumulative = weights.cumsum() / weights.sum()
+            control[own] = np.minimum(cumulative.searchsorted(u[own, 4], side="right"), len(weights) - 1)
+            with_points.append(own)
+            radii.append(np.array([cp.spread for cp in e.cfg.control_points]).take(control[own]))
+        ball = _ball_points(np.concatenate(normals), np.concatenate(uniforms))
+        ball *= np.concatenate(radii)[:, None]
+        if len(ball) == len(u):  # every emitter that was hit has control points: all rows, in order
+            offset = ball
+        else:
+            _put_rows(offset, np.concatenate([np.arange(s.start, s.stop) for s in with_points]), ball)
     # Circular: the drag D (eq. 3.2) now, in the paper's units (lengths in `equation_unit`, velocities per frame).
     circ = ((pattern & 1) == 0).nonzero()[0]  # codes 0..7 here: even is circular (int8 % is slow)
     bounds = np.searchsorted(circ, first)
