@@ -142,6 +142,7 @@ class Renderer:
         self.ambient = float(self.settings.ambient)
         self._programs: dict[tuple, moderngl.Program] = {}
         self._loaded: dict[tuple, moderngl.Program] = {}  # (directory, name, defines)
+        self._computes: dict[tuple, moderngl.ComputeShader] = {}  # (directory, name, defines)
         self._framebuffers: dict[tuple, moderngl.Framebuffer] = {}
         self.quad_buffer = ctx.buffer(np.array([-1, -1, 1, -1, -1, 1, 1, 1], np.float32).tobytes())
         self.graph = RenderGraph(ResourcePool(self._make_resource, self._free_resource))
@@ -190,11 +191,7 @@ class Renderer:
         geom = directory / f"{name}.geom"
 
         def source(path: Path) -> str:
-            text = shader_source(path)
-            if not defines:
-                return text
-            version, rest = text.split("\n", 1)
-            return "\n".join([version, *(f"#define {d}" for d in defines), rest])
+            return _with_defines(shader_source(path), defines)
 
         try:
             prog = self.program(source(directory / f"{name}.vert"), source(directory / f"{name}.frag"),
@@ -205,8 +202,25 @@ class Renderer:
         self._loaded[key] = prog
         return prog
 
+    def load_compute(self, directory: str | Path, name: str, defines: tuple[str, ...] = ()) -> moderngl.ComputeShader:
+        """``name.comp`` from ``directory`` (GL 4.3), read and compiled once per variant (``defines`` as in
+        :meth:`load_program`, e.g. ``"POINT_SIDE 2"``); :meth:`reload_shaders` picks up edited files too."""
+        key = (str(directory), name, tuple(defines))
+        shader = self._computes.get(key)
+        if shader is not None:
+            return shader
+        text = _with_defines(shader_source(Path(directory) / f"{name}.comp"), defines)
+        try:
+            shader = self.ctx.compute_shader(text)
+        except moderngl.Error as exc:
+            variant = f" ({', '.join(defines)})" if defines else ""
+            raise RuntimeError(f"shader '{name}.comp'{variant} in {directory} failed to compile:\n{exc}") from None
+        self._computes[key] = shader
+        return shader
+
     def reload_shaders(self) -> list[str]:
-        """Re-read every shader loaded by name; a file that no longer compiles keeps its last good program.
+        """Re-read every shader loaded by name (programs and compute shaders); a file that no longer compiles
+        keeps its last good version.
 
         Returns the compile errors (empty when all compiled).  F5 in the window calls this with the config reload.
         """
@@ -218,6 +232,15 @@ class Renderer:
             except (RuntimeError, OSError) as exc:
                 self._loaded[key] = old
                 errors.append(str(exc))
+        for key in list(self._computes):
+            old = self._computes.pop(key)
+            try:
+                self.load_compute(*key)
+            except (RuntimeError, OSError) as exc:
+                self._computes[key] = old
+                errors.append(str(exc))
+            else:
+                old.release()
         return errors
 
     def framebuffer(self, color: moderngl.Texture | list | None, depth: moderngl.Texture | None = None
@@ -477,6 +500,17 @@ class Renderer:
             prog.release()
         self._programs.clear()
         self._loaded.clear()
+        for shader in self._computes.values():
+            shader.release()
+        self._computes.clear()
+
+
+def _with_defines(text: str, defines: tuple[str, ...]) -> str:
+    """``text`` with ``#define <d>`` for each of ``defines`` after its ``#version`` line."""
+    if not defines:
+        return text
+    version, rest = text.split("\n", 1)
+    return "\n".join([version, *(f"#define {d}" for d in defines), rest])
 
 
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.M)

@@ -143,7 +143,6 @@ class DustDevilParticles(RenderFeature):
         self.declared_repeats: dict[tuple[int, str], int] = {}  # (entity, view) -> R of the last declared frame
         self.scatter: bool | None = None  # the coverage-word scatter path; None: probed at the first PBVR frame
         self.compute = False  # the scatter as a compute shader (GL 4.3); else in the vertex stage (GL 4.2)
-        self._computes: dict[int, moderngl.ComputeShader] = {}  # POINT_SIDE -> pbvr_scatter.comp
         self._resolve: dict[str, moderngl.VertexArray] = {}
 
     def extract(self, world) -> list[DevilFrame]:
@@ -199,17 +198,10 @@ class DustDevilParticles(RenderFeature):
         return vao
 
     def _compute(self, point_side: int) -> moderngl.ComputeShader:
-        """``shaders/pbvr_scatter.comp`` for points of ``point_side`` pixels (compiled once per side)."""
-        shader = self._computes.get(point_side)
-        if shader is None:
-            version, rest = shader_source(SHADERS / "pbvr_scatter.comp").split("\n", 1)
-            source = f"{version}\n#define POINT_SIDE {point_side}\n#define LOCAL_SIZE {COMPUTE_GROUP}\n{rest}"
-            try:
-                shader = self._computes[point_side] = self.ctx.compute_shader(source)
-            except moderngl.Error as exc:
-                raise RuntimeError(f"shader 'pbvr_scatter.comp' (POINT_SIDE {point_side}) in {SHADERS} failed to "
-                                   f"compile:\n{exc}") from None
-        return shader
+        """``shaders/pbvr_scatter.comp`` for points of ``point_side`` pixels (compiled once per side by the
+        renderer, which reloads it with F5)."""
+        return self.renderer.load_compute(SHADERS, "pbvr_scatter", (f"POINT_SIDE {point_side}",
+                                                                    f"LOCAL_SIZE {COMPUTE_GROUP}"))
 
     def use_scatter(self, repeats: int) -> bool:
         """Whether R repeats take the scatter path (R <= 64 and the context compiles its shaders; probed once, and
@@ -432,9 +424,6 @@ class DustDevilParticles(RenderFeature):
         for vao in self._resolve.values():
             vao.release()
         self._resolve.clear()
-        for shader in self._computes.values():
-            shader.release()
-        self._computes.clear()
 
 
 class DustDevilMarkers(RenderFeature):

@@ -175,6 +175,37 @@ def test_reload_shaders_picks_up_edits_and_keeps_the_last_good_program(tmp_path)
     app.renderer = None
 
 
+def test_compute_shaders_load_by_name_with_defines_and_reload_with_f5(tmp_path):
+    comp = ("#version 430\nlayout(local_size_x = 1) in;\nlayout(std430, binding = 0) buffer Out { float v[]; };\n"
+            "void main() { v[0] = %s; }\n")
+    (tmp_path / "fill.comp").write_text(comp % "float(VALUE)")
+    app = App(SCENE)
+    renderer = make_renderer(app, 32, 32)
+    out = renderer.ctx.buffer(reserve=4)
+
+    def run(shader) -> float:
+        out.bind_to_storage_buffer(0)
+        shader.run(1)
+        renderer.ctx.memory_barrier()
+        return float(np.frombuffer(out.read(), np.float32)[0])
+
+    try:
+        three = renderer.load_compute(tmp_path, "fill", ("VALUE 3",))
+        assert renderer.load_compute(tmp_path, "fill", ("VALUE 3",)) is three  # cached per variant
+        assert run(three) == 3.0 and run(renderer.load_compute(tmp_path, "fill", ("VALUE 5",))) == 5.0
+        (tmp_path / "fill.comp").write_text(comp % "float(VALUE) + 0.5")
+        assert renderer.reload_shaders() == []
+        assert run(renderer.load_compute(tmp_path, "fill", ("VALUE 3",))) == 3.5  # the edit is live
+        (tmp_path / "fill.comp").write_text(comp % "this is not glsl")
+        errors = renderer.reload_shaders()
+        assert len(errors) == 2 and all("fill.comp" in e for e in errors)
+        assert run(renderer.load_compute(tmp_path, "fill", ("VALUE 3",))) == 3.5  # the last good one stays
+    finally:
+        out.release()
+        renderer.release()
+        app.renderer = None
+
+
 def test_program_variants_define_names_in_every_stage_and_are_cached_apart(tmp_path):
     (tmp_path / "flat.vert").write_text(
         "#version 330\nvoid main() { vec2 p = vec2((gl_VertexID << 1) & 2, gl_VertexID & 2);\n"
