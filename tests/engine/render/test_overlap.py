@@ -110,3 +110,33 @@ def test_overlapped_ticks_draw_the_same_pictures_and_reach_the_same_state(monkey
     for a, b in zip(plain, over):
         assert np.array_equal(a, b)
     assert not np.array_equal(plain[0], plain[-1])  # the frames did change: the comparison means something
+
+
+def _picture_at(tick: int, scene: str) -> np.ndarray:
+    app = App(scene)
+    renderer = make_renderer(app, 96, 64)
+    try:
+        app.step(tick)
+        app.render_frame()
+        return np.asarray(renderer.read_image())
+    finally:
+        renderer.release()
+        app.renderer = None
+
+
+def test_advance_overlapped_shows_the_state_before_its_ticks_and_plain_advance_the_state_after():
+    scene = "configs/scenes/energy_wave_showcase.toml"  # beams in flight: every tick changes the picture
+    before, after = _picture_at(30, scene), _picture_at(32, scene)
+    assert not np.array_equal(before, after)
+    for overlap_ticks, expected in ((True, before), (False, after)):
+        app = App(scene)
+        app.config.render.overlap_ticks = overlap_ticks
+        renderer = make_renderer(app, 96, 64)
+        try:
+            app.step(30)
+            assert app.advance(2.5 * app.dt) == 2
+            assert app.world.tick == 32
+            assert np.array_equal(np.asarray(renderer.read_image()), expected)
+        finally:
+            renderer.release()
+            app.renderer = None
