@@ -44,7 +44,6 @@ from engine.render.feature import OPAQUE, TRANSPARENT, RenderFeature, View
 from engine.render.graph import TextureDesc
 from engine.render.passes import SHADERS as ENGINE_SHADERS
 from engine.render.passes import lighting_uniforms, opaque_setup, primitive, set_uniforms
-from engine.render.renderer import shader_source
 from engine.spatial import Transform
 from systems.dust_devil.simulate import marker_points, world_positions
 
@@ -149,14 +148,14 @@ class DustDevilParticles(RenderFeature):
         return extract_devils(world)
 
     # -------------------------------------------------------------------------- GL objects
-    def _vao(self, devil: DevilFrame, program: str, defines: str = "") -> moderngl.VertexArray:
-        """The VAO of ``shaders/<program>`` (``defines`` put after its #version line) over the devil's particle
-        buffer, uploaded once per frame."""
+    def _vao(self, devil: DevilFrame, program: str, defines: tuple[str, ...] = ()) -> moderngl.VertexArray:
+        """The VAO of ``shaders/<program>`` (the renderer's variant ``defines``) over the devil's particle buffer,
+        uploaded once per frame."""
         buf = self._particle_buffer(devil)
         vaos = self._buffers[devil.entity][1]
-        key = program + defines
+        key = (program, defines)
         if key not in vaos:
-            prog = self._program(program, defines)
+            prog = self.renderer.load_program(SHADERS, program, defines)
             vaos[key] = self.ctx.vertex_array(prog, [(buf, "3f", "in_position")])
         return vaos[key]
 
@@ -177,16 +176,6 @@ class DustDevilParticles(RenderFeature):
             buf.write(devil.positions)
             self._uploaded[devil.entity] = frame
         return buf
-
-    def _program(self, name: str, defines: str = "") -> moderngl.Program:
-        """``shaders/<name>.vert`` + ``.frag`` with ``defines`` after the vertex shader's #version line."""
-        if not defines:
-            return self.renderer.load_program(SHADERS, name)
-        version, rest = shader_source(SHADERS / f"{name}.vert").split("\n", 1)
-        try:
-            return self.renderer.program(f"{version}\n{defines}\n{rest}", shader_source(SHADERS / f"{name}.frag"))
-        except moderngl.Error as exc:
-            raise RuntimeError(f"shader '{name}' ({defines}) in {SHADERS} failed to compile:\n{exc}") from None
 
     def _resolve_vao(self, fragment: str) -> moderngl.VertexArray:
         """A full-screen triangle with ``shaders/<fragment>.frag``."""
@@ -308,7 +297,7 @@ class DustDevilParticles(RenderFeature):
                 set_uniforms(shader, particles=n, repeats=devil.repeats, **uniforms)
                 shader.run((n + COMPUTE_GROUP - 1) // COMPUTE_GROUP)
             else:
-                vao = self._vao(devil, "pbvr_scatter", f"#define POINT_SIDE {math.ceil(devil.point_size)}")
+                vao = self._vao(devil, "pbvr_scatter", (f"POINT_SIDE {math.ceil(devil.point_size)}",))
                 set_uniforms(vao.program, **uniforms)
                 ctx.enable(moderngl.RASTERIZER_DISCARD)
                 vao.render(moderngl.POINTS, vertices=len(devil.positions),

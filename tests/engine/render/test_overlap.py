@@ -11,7 +11,7 @@ import numpy as np
 from engine.app import App
 from engine.render.graph import PassBuilder, RenderGraph, ResourcePool, TextureDesc
 from engine.render.passes import HudFeature
-from tests.render_utils import make_renderer
+from tests.render_utils import make_renderer, render_app
 
 COLOR = TextureDesc(16, 16, "rgba8")
 
@@ -113,15 +113,7 @@ def test_overlapped_ticks_draw_the_same_pictures_and_reach_the_same_state(monkey
 
 
 def _picture_at(tick: int, scene: str) -> np.ndarray:
-    app = App(scene)
-    renderer = make_renderer(app, 96, 64)
-    try:
-        app.step(tick)
-        app.render_frame()
-        return np.asarray(renderer.read_image())
-    finally:
-        renderer.release()
-        app.renderer = None
+    return np.asarray(render_app(App(scene), 96, 64, frames=1, steps_per_frame=tick))
 
 
 def test_advance_overlapped_shows_the_state_before_its_ticks_and_plain_advance_the_state_after():
