@@ -369,7 +369,7 @@ def test_sampled_crowded_cells_estimate_the_exact_sum():
     assert 0.8 < ratio < 1.25
 
 
-def _sampled_reference(query, pts, radius, limit):
+def _sampled_reference(query, pts, radius, limit, strength=1.0):
     """The sampled R (eq. 3.3) pair by pair, straight from the definition: the points in reach hashed into a table
     of 2·n (a power of 2, at least 16) buckets, sorted by bucket (ties by index); for each query the buckets of the
     27 cells around it (each bucket once, in ascending order); when some bucket holds more than ``limit``
@@ -391,18 +391,20 @@ def _sampled_reference(query, pts, radius, limit):
     out = np.zeros_like(query)
     serial = 0
     for i, keys in enumerate(rows):
-        for key in keys:
+        for key in keys:  # the kernel's float order: per bucket its samples in order, then the buckets in order
             count = int(counts[key])
             taken = min(count, limit) if sampled else count
             stride = count / taken
             phase = serial * _GOLDEN % 1.0 if sampled else 0.0
             serial += 1
+            bucket = np.zeros(3)
             for k in range(taken):
-                d = query[i] - near[starts[key] + int((k + phase) * stride)]
-                d2 = float(d @ d)
+                d = query[i] - near[min(starts[key] + int((k + phase) * stride), len(near) - 1)]
+                d2 = float(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
                 if 1e-18 < d2 <= radius * radius:
-                    out[i] += stride * d / d2
-    return out
+                    bucket += d * (stride / d2)
+            out[i] += bucket
+    return out * strength
 
 
 def test_sampled_repulsion_equals_the_sampling_evaluated_pair_by_pair():
@@ -412,3 +414,15 @@ def test_sampled_repulsion_equals_the_sampling_evaluated_pair_by_pair():
     got = neighbour_repulsion(query, pts, 0.1, 1.0, per_bucket_limit=16)
     assert not np.allclose(got, neighbour_repulsion(query, pts, 0.1, 1.0))  # crowded cells were sampled
     np.testing.assert_allclose(got, _sampled_reference(query, pts, 0.1, 16), rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.parametrize("limit", [0, 16, 3])
+def test_kernel_repulsion_is_the_pair_by_pair_sum_bit_for_bit(limit):
+    """The compiled kernels (hash, bucket scan, sampling, float order) give exactly the pair-by-pair sum."""
+    rng = np.random.default_rng(11 + limit)
+    pts = np.concatenate([rng.normal(0.3, 0.05, (900, 3)), rng.uniform(-0.4, 0.6, (200, 3))])
+    pts[:40] = np.round(pts[:40], 1)  # duplicates and points on cell borders
+    query = np.concatenate([pts[:50], pts[:1], rng.uniform(-0.2, 0.8, (30, 3))])  # a query twice
+    got = neighbour_repulsion(query, pts, 0.1, 4.0, per_bucket_limit=limit)
+    assert np.abs(got).max() > 0.0
+    assert np.array_equal(got, _sampled_reference(query, pts, 0.1, limit if limit else 1 << 62, 4.0))
