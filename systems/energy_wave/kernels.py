@@ -189,3 +189,31 @@ def repulsion_sums(query, first, cells, offsets, tables, strength, limit, counts
             out[q, 0] = tx * strength[g]
             out[q, 1] = ty * strength[g]
             out[q, 2] = tz * strength[g]
+
+
+@kernel(inline="always")
+def _inside(points, i, lo, hi) -> bool:
+    """lo <= points[i] <= hi on every axis (NaN: outside), without branches (bitwise and of the tests)."""
+    x, y, z = points[i, 0], points[i, 1], points[i, 2]
+    return (lo[0] <= x) & (x <= hi[0]) & (lo[1] <= y) & (y <= hi[1]) & (lo[2] <= z) & (z <= hi[2])
+
+
+@kernel
+def gather_in_box(position, pattern, count, extra, lo, hi, out) -> int:  # pragma: no cover
+    """The neighbours Q of eq. 3.3 near one emitter's impact, in one pass: the rows of ``position[:count]`` whose
+    particle has already hit (``pattern`` >= 0) and then the rows of ``extra`` (this step's hits) that lie in the
+    box ``lo`` .. ``hi`` (the queries' box grown by the radius), in index order, into ``out`` (room for
+    ``count + len(extra)`` rows); returns how many. Branch-free compaction: every row is written at the next
+    free slot, which advances only for the rows kept (the tests are data-dependent: branches mispredict)."""
+    k = 0
+    for i in range(count):
+        out[k, 0] = position[i, 0]
+        out[k, 1] = position[i, 1]
+        out[k, 2] = position[i, 2]
+        k += (pattern[i] >= 0) & _inside(position, i, lo, hi)
+    for i in range(len(extra)):
+        out[k, 0] = extra[i, 0]
+        out[k, 1] = extra[i, 1]
+        out[k, 2] = extra[i, 2]
+        k += _inside(extra, i, lo, hi)
+    return k

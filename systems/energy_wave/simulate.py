@@ -42,7 +42,8 @@ from engine.noise import PerlinNoise
 from engine.spatial import Transform, quat_rotate, quat_to_matrix
 from engine.world import World
 
-from .neighbours import grouped_repulsion, in_box
+from .kernels import gather_in_box
+from .neighbours import grouped_repulsion
 
 F64 = NDArray[np.float64]
 
@@ -501,6 +502,8 @@ def _splash(emitters: list[_Emitter], first: NDArray[np.int64], rows: NDArray[np
     # Neighbours for R (eq. 3.3): every particle of the emitter already hit (its hits are still BEAM in the buffer)
     # and its hits this step, only those near the queries (the impact zone is small).
     neighbours = []
+    gathered = _SCRATCH.get("neighbours", (sum(e.state.particles.count for e in emitters) + len(point), 3))
+    used = 0
     query = _take_rows(point, circ)
     querying = np.flatnonzero(circ_counts)  # each emitter's queries' box (neighbours.in_reach), all at once
     lows = np.minimum.reduceat(query, bounds[querying]) if querying.size else query
@@ -515,8 +518,9 @@ def _splash(emitters: list[_Emitter], first: NDArray[np.int64], rows: NDArray[np
         lo = lows[k] - e.cfg.repulsion_radius  # the box grown by the radius
         hi = highs[k] + e.cfg.repulsion_radius
         k += 1
-        settled = in_box(buf.position[: buf.count], lo, hi, buf.pattern[: buf.count] >= 0)
-        neighbours.append(np.concatenate([_take_rows(buf.position, settled), _take_rows(own, in_box(own, lo, hi))]))
+        found = gather_in_box(buf.position, buf.pattern, buf.count, own, lo, hi, gathered[used:])
+        neighbours.append(gathered[used: used + found])
+        used += found
     slots = np.concatenate([e.beam[rows[first[i]: first[i + 1]]] for i, e in enumerate(emitters)])
     return _Splashes(first, slots, point, normal, pattern, lifetime, c, control, offset, circ, query, drag, neighbours,
                      w)

@@ -142,3 +142,24 @@ def test_row_helpers_and_dead_removal_match_fancy_indexing():
         source[dead_at[dead_at < 36]] = kept[kept >= 36]
         for old, new in zip(before, buf.arrays()):
             assert np.array_equal(new[:36], old[source])
+
+
+def test_gather_in_box_equals_the_numpy_selection():
+    """The neighbour gathering kernel keeps exactly the settled rows (pattern >= 0) in the box, then the extra rows
+    in the box, in index order (borders inclusive, NaN outside)."""
+    from systems.energy_wave.kernels import gather_in_box
+    from systems.energy_wave.neighbours import in_box
+
+    rng = np.random.default_rng(12)
+    position = np.round(rng.uniform(-1.0, 1.0, (400, 3)), 1)  # many points exactly on the box's faces
+    position[5] = np.nan
+    pattern = rng.integers(-1, 8, 400).astype(np.int8)
+    extra = np.round(rng.uniform(-1.0, 1.0, (30, 3)), 1)
+    lo, hi = np.array([-0.5, -0.3, -0.8]), np.array([0.5, 0.7, 0.2])
+    out = np.full((430, 3), -7.0)
+    found = gather_in_box(position, pattern, 300, extra, lo, hi, out)  # the buffer's live range is [0, 300)
+    expected = np.concatenate([position[in_box(position[:300], lo, hi, pattern[:300] >= 0)],
+                               extra[in_box(extra, lo, hi)]])
+    assert 0 < len(expected) < 330
+    assert found == len(expected)
+    assert np.array_equal(out[:found], expected)
