@@ -198,6 +198,10 @@ def _advance(cfg: DustDevilConfig, state: DustDevilState, transform: Transform, 
     size = np.asarray(cfg.field_size)
     h = dt / cfg.substeps
     terrain = ground is not None and cfg.terrain_interaction
+    if USE_KERNELS and _kernel_case(transform, ground if terrain else None):
+        dead = _advance_kernel(cfg, state, transform, ground if terrain else None, wind, h, dt)
+        emit(cfg, state, dead, transform, ground, emit_rng)
+        return
     for _ in range(cfg.substeps):
         v = to_world(transform, _velocity(cfg, wind, size, state.positions, h), direction=True)
         world = to_world(transform, state.positions)
@@ -215,6 +219,41 @@ def _advance(cfg: DustDevilConfig, state: DustDevilState, transform: Transform, 
     outside = out_of_box[:, 0] | out_of_box[:, 1] | out_of_box[:, 2]  # np.any(axis=1) is slow over 3 columns
     dead = np.flatnonzero(outside | (state.ages >= state.lifetimes))
     emit(cfg, state, dead, transform, ground, emit_rng)
+
+
+USE_KERNELS = True  # the compiled particle step (kernels.py) where it applies; False: numpy only (tests compare)
+
+
+def _kernel_case(transform: Transform, ground: Ground | None) -> bool:
+    """Whether the compiled step applies: the box is not rotated or scaled, the terrain (if any) not rotated."""
+    if not (_is_identity(transform.rotation) and np.all(transform.scale == 1.0)):
+        return False
+    return ground is None or ground.transform is None or _is_identity(ground.transform.rotation)
+
+
+def _advance_kernel(cfg: DustDevilConfig, state: DustDevilState, transform: Transform, ground: Ground | None,
+                    wind: WindField, h: float, dt: float) -> NDArray[np.intp]:
+    """The particles' part of :func:`_advance` as one compiled pass (kernels.advance_particles, the same bits);
+    returns the particles to emit again."""
+    from systems.dust_devil.kernels import advance_particles
+
+    positions = np.ascontiguousarray(state.positions, dtype=np.float64)
+    ages = np.ascontiguousarray(state.ages, dtype=np.float64)
+    dead = np.empty(len(positions), dtype=np.bool_)
+    if ground is not None:
+        field = ground.field
+        heights, origin, spacing = field.heights, np.asarray(field.origin, dtype=np.float64), float(field.spacing)
+        ground_position = (np.zeros(3) if ground.transform is None
+                           else np.asarray(ground.transform.position, dtype=np.float64))
+    else:
+        heights, origin, spacing, ground_position = np.zeros((2, 2)), np.zeros(2), 1.0, np.zeros(3)
+    wind.evaluated += advance_particles(
+        positions, ages, np.ascontiguousarray(state.lifetimes, dtype=np.float64), dead, wind._flat, wind._known,
+        wind.dims.astype(np.int64), wind.kernel_args(), cfg.lookup == "trilinear", cfg.integrator == "midpoint",
+        int(cfg.substeps), float(h), float(dt), np.asarray(transform.position, dtype=np.float64),
+        ground is not None, heights, origin, spacing, ground_position)
+    state.positions, state.ages = positions, ages
+    return np.flatnonzero(dead)
 
 
 def step(cfg: DustDevilConfig, state: DustDevilState, transform: Transform, ground: Ground | None,

@@ -177,6 +177,15 @@ class WindField:
         self._known[todo] = True
         self.evaluated += len(todo)
 
+    def kernel_args(self) -> tuple:
+        """What :func:`systems.dust_devil.kernels.advance_particles` evaluates grid points from: the unit
+        coordinates of the grid lines (ux, 1 - uz, uy), the per-height terms (xc, yc, r, r2; the float64
+        trigonometry, by numpy as in :func:`wind_at_nodes`), the box size and the wind scale."""
+        ux, uy, uz = grid_points(self.resolution)
+        xc, yc, r, r2 = _slices(uy, self.t, self.rotation)
+        return (ux, 1.0 - uz, uy, xc, yc, r, r2, np.asarray(self.size, dtype=np.float64),
+                float(self.wind_scale))
+
     def sample(self, unit: F64, mode: str = "nearest") -> F64:
         """Velocity (N, 3) at unit coordinates (N, 3), as :func:`sample_wind` on the whole grid."""
         nodes, fraction = lookup_nodes(self.dims, unit, mode)
