@@ -53,6 +53,9 @@ _SHARED_FACE = _shared_faces()
 _MAX_BOX_VERTICES = 6  # a plane cuts a box in at most a hexagon
 _ON_OUTLINE = 3.0 * NUDGE  # grid units: this close to the outline counts as on it in eq. 2.6 / 2.7 (> the nudge)
 _HALF_CELLS = np.array([(0, 0), (1, 0), (-1, 1), (0, 1), (1, 1)], np.int64)  # the own square first
+# The same tables for the compiled step (kernels.py): the box's edges as corner pairs, the face two edges share.
+EDGE_A, EDGE_B = np.ascontiguousarray(_EA), np.ascontiguousarray(_EB)
+SHARED_FACE, MAX_BOX_VERTICES = _SHARED_FACE, _MAX_BOX_VERTICES
 
 
 @dataclass
@@ -242,7 +245,7 @@ def _sort_ccw(u: F64, v: F64, valid: np.ndarray, exact: bool) -> tuple[F64, I64,
 
 
 @lru_cache(maxsize=8)
-def _ring(segments: int) -> F64:
+def sphere_ring(segments: int) -> F64:
     """(segments, 2) unit circle counter-clockwise in (u, v)."""
     angles = 2.0 * np.pi * np.arange(segments) / segments
     ring = np.stack([np.cos(angles), np.sin(angles)], axis=-1)
@@ -255,7 +258,7 @@ def _sphere_sections(bodies: Bodies, plane_y: F64, grid: Grid, segments: int) ->
     rho2 = bodies.radius ** 2 - d ** 2
     rho = np.sqrt(np.maximum(rho2, 0.0)) / grid.h
     centre = grid.to_uv(bodies.position[:, ::2])
-    polygons = centre[:, None, :] + rho[:, None, None] * _ring(segments)[None, :, :]
+    polygons = centre[:, None, :] + rho[:, None, None] * sphere_ring(segments)[None, :, :]
     return polygons, np.where(rho2 > 0.0, segments, 0).astype(np.int64)
 
 

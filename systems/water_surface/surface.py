@@ -15,11 +15,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from components.water_surface import WaterState, WaterSurface
-from systems.water_surface.geometry import (F64, I64, Bodies, Grid, all_of, any_of, bilinear, bilinear_fields, ranges,
-                                            sum_of)
+from systems.water_surface.geometry import (BOX, F64, I64, Bodies, Grid, all_of, any_of, bilinear, bilinear_fields,
+                                            ranges, sum_of)
 from systems.water_surface.grid_source import column_depths
-from systems.water_surface.outline import (AddedPoints, Sections, added_points, coupling_pairs, cross_sections,
-                                           nudge, outline_impulse, solid_vertices)
+from systems.water_surface import kernels as K
+from systems.water_surface.outline import (EDGE_A, EDGE_B, MAX_BOX_VERTICES, SHARED_FACE, AddedPoints, Sections,
+                                           cross_sections, nudge, sphere_ring)
 from systems.water_surface.waves import courant_k, dents, free_degree, propagate
 
 __all__ = ["StepReport", "plane_levels", "step_water"]
@@ -186,88 +187,150 @@ def _disturb(state: WaterState, cfg: WaterSurface, grid: Grid, dt: float, rng: n
 
 def step_water(state: WaterState, cfg: WaterSurface, grid: Grid, bodies: Bodies, dt: float,
                rng: np.random.Generator | None = None) -> StepReport:
-    """Advance ``state`` by one fixed step ``dt`` with ``bodies`` at their new transforms."""
+    """Advance ``state`` by one fixed step ``dt`` with ``bodies`` at their new transforms.
+
+    The outline method runs as a few compiled kernels (``kernels.py``: the same arithmetic as the numpy functions
+    named in their docstrings, in the same order, so the same bits); the older ``grid`` method stays in numpy."""
     k = courant_k(cfg.wave_speed, cfg.spacing, dt)
     if state.degree is None or state.degree.shape != state.heights.shape or state.coefficient_k != k:
         state.degree = free_degree(*state.heights.shape)
         state.coefficient = 2.0 - k * state.degree
         state.coefficient_k = k
-    volume = _water_mean(state.heights, _solid_index(state))
+    volume = K.water_mean(state.heights, _solid_flat(state))
     if cfg.disturbance_rate > 0.0 or state.splashes:
         _disturb(state, cfg, grid, dt, rng)
     z = state.heights
     if len(bodies):
-        near = _near(bodies, grid, state, cfg.depth)
+        near = K.near_bodies(bodies.extent(), bodies.position, grid.x0, grid.z0, grid.h, grid.nx, grid.nz, grid.y0,
+                             float(cfg.depth), z)
         if not all_of(near, axis=None):
             bodies = bodies.take(near)
-    levels = plane_levels(z, state.solid, bodies, grid)
+    levels = _plane_levels(z, state.solid, bodies, grid)
     plane_y = grid.y0 + levels
-    sections = nudge(cross_sections(bodies, plane_y, grid, cfg.sphere_segments))
-    report = StepReport(bodies, plane_y, sections)
     if cfg.wave_source == "outline":
-        new, new_points, points, previous_points = _outline_step(state, cfg, grid, bodies, sections, levels,
-                                                                 plane_y, k, report)
+        report = _outline_step(state, cfg, grid, bodies, levels, plane_y, k, volume)
     else:
-        new, new_points, points, previous_points = _grid_step(state, cfg, grid, bodies, plane_y, k, report)
-    # Keep the water's volume: drops, impacts, points coming and going and vertices changing between water and
-    # body move the mean level a little; shift it back (heights at t and t + 1 alike: no velocity).
-    mean = _water_mean(new, _solid_index(state) if cfg.wave_source == "outline" else None)
-    shift = volume - mean
-    if shift != 0.0:
-        z += shift
-        previous_points = previous_points + shift
-    if cfg.damping < 1.0:  # section 2.3.2, about the mean level of the water: new ← V + d·(new + shift − V)
-        new *= cfg.damping
-        new += volume - cfg.damping * mean
-        new_points = volume + cfg.damping * (new_points - mean)
-    elif shift != 0.0:
-        new += shift
-        new_points = new_points + shift
-    state.previous, state.heights = z, new
-    state.point_keys, state.point_uv, state.point_kind = points.keys, points.uv, points.kind
-    state.point_heights, state.point_previous, state.segments = new_points, previous_points, points.segments
+        report = _grid_method_step(state, cfg, grid, bodies, levels, plane_y, k, volume)
     state.body_entities = bodies.entities.copy()
-    if cfg.wave_source != "outline":
-        state.solid_index = None
     state.polygons, state.polygon_counts = report.sections.polygons, report.sections.counts
-    state.section_edges = (report.sections.polygons, report.sections._edges)  # next step's D'(t − 1) edges
     state.last_raised = report.change
-    report.points = points
     return report
 
 
-def _outline_step(state, cfg, grid, bodies, sections, levels, plane_y, k, report):
-    """The paper's method: added points on the outline make and reflect the waves."""
+def _solid_flat(state: WaterState) -> I64:
+    """Flat indices of the vertices inside bodies, ascending (empty when there are none)."""
+    index = _solid_index(state)
+    return _NO_INDEX if index is None else index
+
+
+_NO_INDEX = np.zeros(0, np.int64)
+
+
+def _plane_levels(z: F64, solid: np.ndarray, bodies: Bodies, grid: Grid) -> F64:
+    """:func:`plane_levels` by its kernel (a huge all-solid window's mean by numpy)."""
+    centre = (bodies.position[:, ::2] - (grid.x0, grid.z0)) / grid.h
+    levels, fallback = K.plane_levels(z, solid, centre, bodies.horizontal_half() / grid.h)
+    if any_of(fallback, axis=None):
+        index = fallback.nonzero()[0]
+        levels[index] = plane_levels(z, solid, bodies.take(index), grid)
+    return levels
+
+
+_CORNERS_T = np.ascontiguousarray(np.array([[sx, sy, sz] for sx in (-1.0, 1.0) for sy in (-1.0, 1.0)
+                                            for sz in (-1.0, 1.0)]).T)  # (3, 8) box corners, coordinate-major
+
+
+def _sections(bodies: Bodies, plane_y: F64, grid: Grid, segments: int) -> Sections:
+    """Cross-sections D' (``outline.cross_sections``), nudged off the grid lines (``outline.nudge``)."""
+    n = len(bodies)
+    is_box = bodies.shapes == BOX
+    boxes, spheres = bool(any_of(is_box, axis=None)), not bool(all_of(is_box, axis=None))
+    width = max(MAX_BOX_VERTICES if boxes else 0, segments if spheres else 0, 3)
+    polygons = np.zeros((n, width, 2))
+    counts = np.zeros(n, np.int64)
+    vfeat = np.zeros((n, width), np.int64)
+    efeat = np.zeros((n, width), np.int64)
+    if boxes:
+        rows = np.arange(n) if not spheres else is_box.nonzero()[0]
+        corners = bodies.rotation @ (_CORNERS_T * bodies.half[:, :, None]) + bodies.position[:, :, None]
+        K.box_sections(corners, plane_y, EDGE_A, EDGE_B, SHARED_FACE, grid.x0, grid.z0, grid.h, polygons, counts,
+                       vfeat, efeat, rows)
+    if spheres:
+        K.sphere_sections(bodies.position, bodies.radius, plane_y, sphere_ring(segments), grid.x0, grid.z0, grid.h,
+                          polygons, counts, vfeat, efeat, (~is_box).nonzero()[0])
+    K.nudge(polygons, counts)
+    return Sections(polygons, counts, vfeat, efeat)
+
+
+def _previous_table(state: WaterState, bodies: Bodies, width: int) -> tuple[F64, np.ndarray]:
+    """Edge table of each body's cross-section at t − 1 (padded to ``width``) and whether it had one (3 or more
+    vertices)."""
+    known = state.body_entities
+    if (len(known) == len(bodies) and state.polygons.shape[1] == width and len(state.polygon_counts) == len(known)
+            and np.array_equal(known, bodies.entities)):  # the same bodies as last step
+        cached = state.section_edges
+        if cached is not None and cached[0] is state.polygons:
+            table = cached[1]
+        else:
+            table = K.edge_table(state.polygons, state.polygon_counts)
+        return table, state.polygon_counts >= 3
+    before, has = _previous(state, bodies, width)
+    return K.edge_table(before.polygons, before.counts), has & (before.counts >= 3)
+
+
+def _outline_step(state, cfg, grid, bodies, levels, plane_y, k, volume) -> StepReport:
+    """The paper's method: added points on the outline make and reflect the waves (kernels.py)."""
     z, zp = state.heights, state.previous
-    points, sections = added_points(sections, bodies.entities, grid)
-    report.sections = sections
-    heights, previous = _carried(state, points, z, zp)
-    before, has = _previous(state, bodies, sections.polygons.shape[1])
-    change, _, raised, lowered = outline_impulse(points, sections, before, has, grid, cfg.outline_constant)
-    solid, solid_body = solid_vertices(sections, grid)
-    state.solid = np.zeros(z.shape, bool)
-    state.solid.ravel()[solid] = True
-    # the vertices inside bodies once each and ascending, as ``state.solid.nonzero()`` gives them (the water's
-    # mean level sums them in this order): the scanlines sorted, unless bodies overlap
-    if len(bodies) == 1:
-        unique = solid
-    elif np.count_nonzero(state.solid) == len(solid):
-        unique = np.sort(solid)
-    else:
-        unique = state.solid.ravel().nonzero()[0]
+    sections = _sections(bodies, plane_y, grid, cfg.sphere_segments)
+    uv, kind, keys, body, segments = K.added_points(sections.polygons, sections.counts, sections.vertex_feature,
+                                                    sections.edge_feature, bodies.entities, grid.nx, grid.nz)
+    points = AddedPoints(uv, kind, keys, body, segments)
+    heights, previous = K.carried(state.point_keys, state.point_heights, state.point_previous, keys, uv, z, zp)
+    after = K.edge_table(sections.polygons, sections.counts)
+    before, old = _previous_table(state, bodies, sections.polygons.shape[1])
+    change, raised, lowered = K.outline_impulse(uv, body, before, old, after, grid.h, cfg.outline_constant,
+                                                len(bodies))
+    solid, owner = K.solid_vertices(after, sections.counts, grid.nx, grid.nz)
+    state.solid, unique = K.solid_mask(solid, grid.nz, grid.nx)
     state.solid_index = (state.solid, unique)
-    pairs = coupling_pairs(points, state.solid, grid, solid_mask=True, slots=_slots(state))
-    new, new_points = propagate(z, zp, k, state.coefficient, state.degree, solid, pairs, heights, previous,
-                                _scratch(state), reuse=True, solid_mask=state.solid, slots=_slots(state))
-    # eq. 2.6 / 2.7: a displacement of the point (its height history moves with it, so no velocity is injected)
-    new_points += change
-    heights = heights + change
-    if len(solid):  # inside the body: held at the plane S' (hidden under the body), no velocity
-        held = levels[solid_body]
-        new.ravel()[solid] = held
-        z.ravel()[solid] = held
-    report.change, report.raised, report.lowered, report.solid = change, raised, lowered, solid
-    return new, new_points, points, heights
+    g, p, w = K.grid_pairs(uv, state.solid, grid.nx, grid.nz)
+    a, b, w2 = K.point_pairs(uv, grid.nx, grid.nz)
+    new = zp if zp.flags.c_contiguous and zp.flags.writeable else np.empty_like(z)
+    new_points = K.wave_step(z, zp, k, state.coefficient, state.degree, solid, state.solid, g, p, w, a, b, w2,
+                             heights, previous, new)
+    previous_points = K.finish(z, new, solid, owner, levels, unique, volume, cfg.damping, new_points, change,
+                               heights)
+    state.previous, state.heights = z, new
+    state.point_keys, state.point_uv, state.point_kind = keys, uv, kind
+    state.point_heights, state.point_previous, state.segments = new_points, previous_points, segments
+    state.section_edges = (sections.polygons, after)  # next step's D'(t − 1) edges
+    return StepReport(bodies, plane_y, sections, points, change, raised, lowered, solid)
+
+
+def _grid_method_step(state, cfg, grid, bodies, levels, plane_y, k, volume) -> StepReport:
+    """The older method (numpy): cross-sections for the record, the column displacement, volume and damping."""
+    sections = nudge(cross_sections(bodies, plane_y, grid, cfg.sphere_segments))
+    report = StepReport(bodies, plane_y, sections)
+    new, new_points, points, previous_points = _grid_step(state, cfg, grid, bodies, plane_y, k, report)
+    z = state.heights
+    # Keep the water's volume: drops, impacts and the displaced columns move the mean level a little; shift it back
+    # (heights at t and t + 1 alike: no velocity).
+    mean = _water_mean(new, None)
+    shift = volume - mean
+    if shift != 0.0:
+        z += shift
+    if cfg.damping < 1.0:  # section 2.3.2, about the mean level of the water: new ← V + d·(new + shift − V)
+        new *= cfg.damping
+        new += volume - cfg.damping * mean
+    elif shift != 0.0:
+        new += shift
+    state.previous, state.heights = z, new
+    state.point_keys, state.point_uv, state.point_kind = points.keys, points.uv, points.kind
+    state.point_heights, state.point_previous, state.segments = new_points, previous_points, points.segments
+    state.solid_index = None
+    state.section_edges = None
+    report.points = points
+    return report
 
 
 def _grid_step(state, cfg, grid, bodies, plane_y, k, report):

@@ -1,0 +1,950 @@
+"""Compiled kernels (``engine.jit.kernel``) for one water step of seeds/003: the body outline in the water model
+(sections 2.2.2–2.2.3), the waves it makes (eq. 2.5–2.7) and the propagation with the added points (eq. 2.8–2.12).
+
+The numpy functions of ``outline.py``, ``waves.py`` and ``surface.py`` are the readable statement of the method;
+these kernels do the same arithmetic in the same order, in a few calls per step instead of hundreds of numpy calls
+(a 26 × 26 pool is bound by per-call overhead) and in one pass over a large grid instead of seven. Results are the
+same bits: where numpy sums an array it uses pairwise summation (:func:`pairwise_sum` repeats it), ``bincount``
+sums in order of appearance, a reduction along a leading axis sums in index order; the tests compare every kernel
+with its numpy counterpart.
+
+No loop here runs in Python: each is compiled (numba), with IEEE arithmetic in the order written (no fastmath).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from engine.jit import kernel
+
+# Constants of outline.py / geometry.py, repeated as plain numbers for the compiled code.
+EPS_LINE = 1e-7
+NUDGE = 1e-4
+ON_OUTLINE = 3.0 * NUDGE
+CROSSING_KEY = 1 << 30
+MAX_BOX_VERTICES = 6
+DENSE_PAIRS = 96
+BUFFER = 8192  # numpy's iterator buffer: a strided window's mean sums blocks of this many values
+
+
+# --------------------------------------------------------------------------------------------- summation
+@kernel
+def _block_sum(a, start, n):
+    """numpy's pairwise summation of up to 128 values: one by one below 8, else 8 accumulators."""
+    if n < 8:
+        res = 0.0
+        for i in range(n):
+            res += a[start + i]
+        return res
+    r0, r1, r2, r3 = a[start], a[start + 1], a[start + 2], a[start + 3]
+    r4, r5, r6, r7 = a[start + 4], a[start + 5], a[start + 6], a[start + 7]
+    i = 8
+    stop = n - n % 8
+    while i < stop:
+        j = start + i
+        r0 += a[j]
+        r1 += a[j + 1]
+        r2 += a[j + 2]
+        r3 += a[j + 3]
+        r4 += a[j + 4]
+        r5 += a[j + 5]
+        r6 += a[j + 6]
+        r7 += a[j + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[start + i]
+        i += 1
+    return res
+
+
+@kernel
+def pairwise_sum(a, start, n):
+    """numpy's pairwise summation of ``a[start:start + n]`` (float64, contiguous): blocks of up to 128 summed
+    with 8 accumulators, longer runs split in two at a multiple of 8 (left + right). ``np.add.reduce`` of a
+    contiguous array is ``0.0 + pairwise_sum``. The recursion runs on an explicit stack (numba's cache does not
+    keep recursive functions)."""
+    if n <= 128:
+        return _block_sum(a, start, n)
+    starts = np.empty(64, np.int64)
+    sizes = np.empty(64, np.int64)
+    stage = np.empty(64, np.int64)
+    left = np.empty(64)
+    top = 0
+    starts[0], sizes[0], stage[0] = start, n, 0
+    ret = 0.0
+    have = False
+    while True:
+        if have:  # a finished child: the left half waits for the right one, the right one completes the sum
+            if top < 0:
+                return ret
+            if stage[top] == 1:
+                left[top] = ret
+                stage[top] = 2
+                half = sizes[top] // 2
+                half -= half % 8
+                top += 1
+                starts[top], sizes[top], stage[top] = starts[top - 1] + half, sizes[top - 1] - half, 0
+                have = False
+            else:
+                ret = left[top] + ret
+                top -= 1
+            continue
+        if sizes[top] <= 128:
+            ret = _block_sum(a, starts[top], sizes[top])
+            top -= 1
+            have = True
+            continue
+        half = sizes[top] // 2
+        half -= half % 8
+        stage[top] = 1
+        top += 1
+        starts[top], sizes[top], stage[top] = starts[top - 1], half, 0
+
+
+@kernel
+def water_mean(field, solid):
+    """Mean height of the water vertices: (Σ field − Σ field[solid]) / (size − len(solid)), each sum as numpy's
+    ``np.add.reduce`` takes it (``surface._water_mean``); ``solid`` ascending flat indices (may be empty)."""
+    flat = field.ravel()
+    total = 0.0 + pairwise_sum(flat, 0, flat.size)
+    if len(solid) == 0:
+        return total / flat.size
+    held = np.empty(len(solid))
+    for i in range(len(solid)):
+        held[i] = flat[solid[i]]
+    return (total - (0.0 + pairwise_sum(held, 0, len(held)))) / (flat.size - len(solid))
+
+
+# ----------------------------------------------------------------------------------------------- sampling
+@kernel(inline="always")
+def _bilinear(f, nx, nz, u, v):
+    """geometry.bilinear at one point (eq. 2.2; eq. 2.3/2.4 on a grid edge), ``f`` flat, clamped to the grid."""
+    cu = min(max(u, 0.0), nx - 1)
+    cv = min(max(v, 0.0), nz - 1)
+    i = min(int(cu), nx - 2)
+    j = min(int(cv), nz - 2)
+    tu = cu - i
+    tv = cv - j
+    c = j * nx + i
+    z00, z10, z01, z11 = f[c], f[c + 1], f[c + nx], f[c + nx + 1]
+    bottom = z00 + tu * (z10 - z00)
+    top = z01 + tu * (z11 - z01)
+    return bottom + tv * (top - bottom)
+
+
+@kernel
+def plane_levels(z, solid, centre, half):
+    """S'_z − y0 of each body (``surface.plane_levels``, section 2.2.2): the mean height of the water vertices in
+    its footprint window (grid units ``centre`` ± ``half``), of every vertex there when all were inside bodies,
+    the height at its centre when the window holds no vertex. Up to 3 bodies numpy took each window's mean
+    (pairwise sums), more bodies were summed in order (``bincount``): both are repeated.
+
+    Returns (levels, fallback): ``fallback[b]`` marks a body whose all-solid window is too large to repeat
+    numpy's buffered mean (more than 8192 vertices): the caller takes that mean with numpy."""
+    nz, nx = z.shape
+    nb = len(centre)
+    f = z.ravel()
+    s = solid.ravel()
+    levels = np.empty(nb)
+    fallback = np.zeros(nb, np.bool_)
+    few = nb <= 3
+    buffer = np.empty(0)
+    for b in range(nb):
+        lo_u = np.int64(max(math.ceil(centre[b, 0] - half[b, 0]), 0))
+        lo_v = np.int64(max(math.ceil(centre[b, 1] - half[b, 1]), 0))
+        hi_u = np.int64(min(math.floor(centre[b, 0] + half[b, 0]), nx - 1))
+        hi_v = np.int64(min(math.floor(centre[b, 1] + half[b, 1]), nz - 1))
+        su, sv = max(hi_u - lo_u + 1, 0), max(hi_v - lo_v + 1, 0)
+        if su == 0 or sv == 0:
+            levels[b] = _bilinear(f, nx, nz, centre[b, 0], centre[b, 1])
+            continue
+        count = su * sv
+        if len(buffer) < count:
+            buffer = np.empty(count)
+        if few:
+            n = 0
+            for j in range(lo_v, hi_v + 1):
+                for i in range(lo_u, hi_u + 1):
+                    c = j * nx + i
+                    if not s[c]:
+                        buffer[n] = f[c]
+                        n += 1
+            if n > 0:
+                levels[b] = (0.0 + pairwise_sum(buffer, 0, n)) / n
+                continue
+            if count > BUFFER:
+                fallback[b] = True
+                levels[b] = 0.0
+                continue
+            n = 0
+            for j in range(lo_v, hi_v + 1):
+                for i in range(lo_u, hi_u + 1):
+                    buffer[n] = f[j * nx + i]
+                    n += 1
+            levels[b] = (0.0 + pairwise_sum(buffer, 0, n)) / count
+        else:
+            wet, every, n_water = 0.0, 0.0, 0.0
+            for j in range(lo_v, hi_v + 1):
+                for i in range(lo_u, hi_u + 1):
+                    c = j * nx + i
+                    height = f[c]
+                    water = not s[c]
+                    n_water += 1.0 if water else 0.0
+                    wet += height if water else 0.0
+                    every += height
+            levels[b] = wet / max(n_water, 1.0) if n_water > 0.0 else every / count
+    return levels, fallback
+
+
+@kernel
+def near_bodies(extent, position, x0, z0, h, nx, nz, y0, depth, heights):
+    """``surface._near``: bodies whose footprint overlaps the grid and whose vertical extent reaches the water
+    (from two half heights above the highest wave)."""
+    nb = len(extent)
+    near = np.zeros(nb, np.bool_)
+    first = heights.ravel()[0] + y0
+    highest = np.nan
+    for b in range(nb):
+        cu = (position[b, 0] - x0) / h
+        cv = (position[b, 2] - z0) / h
+        hu, hv = extent[b, 0] / h, extent[b, 2] / h
+        over = (cu + hu >= 0.0) and (cu - hu <= nx - 1) and (cv + hv >= 0.0) and (cv - hv <= nz - 1)
+        vertical, y = extent[b, 1], position[b, 1]
+        if not (over and y + vertical >= y0 - depth):
+            continue
+        low = y - 2.0 * vertical
+        near[b] = low <= first + 1e-9
+    for b in range(nb):  # only when a body is not settled by the first height: the maximum height
+        cu = (position[b, 0] - x0) / h
+        cv = (position[b, 2] - z0) / h
+        hu, hv = extent[b, 0] / h, extent[b, 2] / h
+        over = (cu + hu >= 0.0) and (cu - hu <= nx - 1) and (cv + hv >= 0.0) and (cv - hv <= nz - 1)
+        if near[b] or not (over and position[b, 1] + extent[b, 1] >= y0 - depth):
+            continue
+        if highest != highest:
+            highest = heights.max() + y0
+        near[b] = position[b, 1] - 2.0 * extent[b, 1] <= highest + 1e-9
+    return near
+
+
+# ------------------------------------------------------------------------------------- cross-sections D'
+@kernel
+def box_sections(corners, plane_y, edge_a, edge_b, shared_face, x0, z0, h, polygons, counts, vfeat, efeat, rows):
+    """Cross-section D' of boxes ``rows`` with their planes y = plane_y (section 2.2.2; ``outline._box_sections``,
+    ``_sort_ccw``, ``_box_edge_faces``): each box edge QR straddling the plane gives L = Q + t·(R − Q), sorted
+    counter-clockwise about the centroid (the first 6 columns keep the remaining edges' points as padding, as
+    numpy's sort left them); a box corner on the plane gives one L' from several edges: the repeats are dropped.
+    Written into ``polygons`` (B, W, 2), ``counts``, ``vfeat`` and ``efeat`` at the rows ``rows``."""
+    ne = len(edge_a)
+    exact = False
+    for r in range(len(rows)):
+        b = rows[r]
+        for e in range(ne):
+            if corners[b, 1, edge_a[e]] - plane_y[b] == 0.0 or corners[b, 1, edge_b[e]] - plane_y[b] == 0.0:
+                exact = True
+    u = np.empty(ne)
+    v = np.empty(ne)
+    valid = np.empty(ne, np.bool_)
+    angle = np.empty(ne)
+    order = np.empty(ne, np.int64)
+    buf = np.empty(ne)
+    for r in range(len(rows)):
+        b = rows[r]
+        py = plane_y[b]
+        n = 0
+        for e in range(ne):
+            qa, qb = edge_a[e], edge_b[e]
+            yq = corners[b, 1, qa] - py
+            yr = corners[b, 1, qb] - py
+            straddle = (yq >= 0.0) != (yr >= 0.0)
+            t = yq / (yq - yr if straddle else 1.0)
+            u[e] = (corners[b, 0, qa] + t * (corners[b, 0, qb] - corners[b, 0, qa]) - x0) / h
+            v[e] = (corners[b, 2, qa] + t * (corners[b, 2, qb] - corners[b, 2, qa]) - z0) / h
+            valid[e] = straddle
+            n += 1 if straddle else 0
+        inv = 1.0 / max(n, 1)
+        for e in range(ne):
+            buf[e] = u[e] if valid[e] else 0.0
+        cu = (0.0 + pairwise_sum(buf, 0, ne)) * inv
+        for e in range(ne):
+            buf[e] = v[e] if valid[e] else 0.0
+        cv = (0.0 + pairwise_sum(buf, 0, ne)) * inv
+        for e in range(ne):  # stable insertion sort by angle (inf for the edges that do not straddle)
+            a = math.atan2(v[e] - cv, u[e] - cu) if valid[e] else np.inf
+            k = e
+            while k > 0 and angle[k - 1] > a:
+                angle[k] = angle[k - 1]
+                order[k] = order[k - 1]
+                k -= 1
+            angle[k] = a
+            order[k] = e
+        width = MAX_BOX_VERTICES
+        for k in range(width):
+            polygons[b, k, 0] = u[order[k]]
+            polygons[b, k, 1] = v[order[k]]
+            vfeat[b, k] = order[k]
+        if exact:  # a box vertex on the plane: drop the repeats (kept first, the rest after them in order)
+            keep = np.empty(width, np.bool_)
+            m = 0
+            for k in range(width):
+                if k >= n:
+                    keep[k] = False
+                    continue
+                p = n - 1 if k == 0 else k - 1
+                p = max(p, 0)
+                du = polygons[b, k, 0] - polygons[b, p, 0]
+                dv = polygons[b, k, 1] - polygons[b, p, 1]
+                repeat = k > 0 and (du * du + dv * dv) < 1e-20
+                keep[k] = not repeat
+                m += 0 if repeat else 1
+            pu, pv, pf = polygons[b, :width, 0].copy(), polygons[b, :width, 1].copy(), vfeat[b, :width].copy()
+            at = 0
+            for flag in (True, False):
+                for k in range(width):
+                    if keep[k] == flag:
+                        polygons[b, at, 0], polygons[b, at, 1], vfeat[b, at] = pu[k], pv[k], pf[k]
+                        at += 1
+            n = m
+        c = n if n >= 3 else 0
+        counts[b] = c
+        for k in range(width):
+            following = k + 1 if k + 1 < c else 0
+            face = shared_face[vfeat[b, k], vfeat[b, following]]
+            efeat[b, k] = face if face >= 0 else 6 + k
+
+
+@kernel
+def sphere_sections(position, radius, plane_y, ring, x0, z0, h, polygons, counts, vfeat, efeat, rows):
+    """Cross-section of spheres ``rows``: the regular polygon inscribed in the circle of intersection
+    (``outline._sphere_sections``), written like :func:`box_sections`."""
+    segments = len(ring)
+    for r in range(len(rows)):
+        b = rows[r]
+        d = plane_y[b] - position[b, 1]
+        rho2 = radius[b] * radius[b] - d * d
+        rho = math.sqrt(max(rho2, 0.0)) / h
+        cu = (position[b, 0] - x0) / h
+        cv = (position[b, 2] - z0) / h
+        for k in range(segments):
+            polygons[b, k, 0] = cu + rho * ring[k, 0]
+            polygons[b, k, 1] = cv + rho * ring[k, 1]
+            vfeat[b, k] = k
+            efeat[b, k] = k
+        counts[b] = segments if rho2 > 0.0 else 0
+
+
+@kernel(inline="always")
+def _centre(polygons, counts, b):
+    """``Sections.centres`` of polygon b: its valid vertices summed in order, over max(count, 1)."""
+    su, sv = 0.0, 0.0
+    for k in range(polygons.shape[1]):
+        if k < counts[b]:
+            su += polygons[b, k, 0]
+            sv += polygons[b, k, 1]
+        else:
+            su += 0.0
+            sv += 0.0
+    n = max(counts[b], 1)
+    return su / n, sv / n
+
+
+@kernel(inline="always")
+def _on_line(x):
+    return abs(x - np.rint(x)) < EPS_LINE
+
+
+@kernel
+def nudge(polygons, counts):
+    """``outline.nudge`` in place (figure 2.3): vertices on a grid line or vertex move NUDGE towards the centre,
+    then off a line they ran along. Returns whether any moved."""
+    moved = False
+    for b in range(len(counts)):
+        any_on = False
+        for k in range(counts[b]):
+            if _on_line(polygons[b, k, 0]) or _on_line(polygons[b, k, 1]):
+                any_on = True
+        if not any_on:
+            continue
+        moved = True
+        cu, cv = _centre(polygons, counts, b)
+        for k in range(counts[b]):
+            pu, pv = polygons[b, k, 0], polygons[b, k, 1]
+            if _on_line(pu) or _on_line(pv):
+                tu, tv = cu - pu, cv - pv
+                length = math.sqrt(0.0 + tu * tu + tv * tv)
+                safe = length if length > 0.0 else 1.0
+                pu = pu + NUDGE * tu / safe
+                pv = pv + NUDGE * tv / safe
+            if _on_line(pu):
+                pu = pu + NUDGE * (1.0 if cu - pu >= 0.0 else -1.0)
+            if _on_line(pv):
+                pv = pv + NUDGE * (1.0 if cv - pv >= 0.0 else -1.0)
+            polygons[b, k, 0], polygons[b, k, 1] = pu, pv
+    return moved
+
+
+# -------------------------------------------------------------------------------------------- added points
+@kernel
+def _crossings(polygons, counts, vfeat, efeat, strict):
+    """``outline._outline`` and the ordering of ``outline.added_points``: per polygon edge, its start L' then its
+    crossings M' with the grid lines sorted by the numpy sort key (edge index·2 + t, stable: u-lines before
+    v-lines, ascending lines). Returns (uv, kind, keys without the entity, body, ok); ok is False when, with
+    ``strict``, an edge crosses a u-line at a grid vertex."""
+    nb, width = counts.shape[0], polygons.shape[1]
+    total = 0
+    for b in range(nb):
+        for k in range(counts[b]):
+            nxt = k + 1 if k + 1 < counts[b] else 0
+            for axis in range(2):
+                a, e = polygons[b, k, axis], polygons[b, nxt, axis] - polygons[b, k, axis]
+                end = a + e
+                total += 1 + np.int64(math.floor(max(a, end))) - np.int64(math.floor(min(a, end)))
+    uv = np.empty((total, 2))
+    kind = np.empty(total, np.int8)
+    keys = np.empty(total, np.int64)
+    body = np.empty(total, np.int64)
+    sort = np.empty(64)
+    tmp_t = np.empty(64)
+    tmp_line = np.empty(64, np.int64)
+    tmp_axis = np.empty(64, np.int64)
+    at = 0
+    for b in range(nb):
+        for k in range(counts[b]):
+            nxt = k + 1 if k + 1 < counts[b] else 0
+            au, av = polygons[b, k, 0], polygons[b, k, 1]
+            eu, ev = polygons[b, nxt, 0] - au, polygons[b, nxt, 1] - av
+            base = (b * width + k) * 2.0
+            uv[at, 0], uv[at, 1] = au, av
+            kind[at] = 2
+            keys[at] = vfeat[b, k] << 22
+            body[at] = b
+            at += 1
+            n = 0
+            for axis in range(2):
+                a = au if axis == 0 else av
+                d = eu if axis == 0 else ev
+                end = a + d
+                lo = np.int64(math.floor(min(a, end)))
+                hi = np.int64(math.floor(max(a, end)))
+                count = hi - lo
+                if n + count > len(sort):
+                    size = 2 * (n + count)
+                    sort, tmp_t = _grow(sort, size), _grow(tmp_t, size)
+                    tmp_line, tmp_axis = _grow_int(tmp_line, size), _grow_int(tmp_axis, size)
+                for line in range(lo + 1, hi + 1):
+                    t = (line - a) / d
+                    key = base + t
+                    m = n  # stable insertion by the sort key
+                    while m > 0 and sort[m - 1] > key:
+                        sort[m], tmp_t[m], tmp_line[m], tmp_axis[m] = sort[m - 1], tmp_t[m - 1], tmp_line[m - 1], \
+                            tmp_axis[m - 1]
+                        m -= 1
+                    sort[m], tmp_t[m], tmp_line[m], tmp_axis[m] = key, t, line, axis
+                    n += 1
+            for m in range(n):
+                t, line, axis = tmp_t[m], tmp_line[m], tmp_axis[m]
+                other = av + t * ev if axis == 0 else au + t * eu
+                if strict and axis == 0 and abs(other - np.rint(other)) < EPS_LINE:
+                    return uv, kind, keys, body, False
+                if axis == 0:
+                    uv[at, 0], uv[at, 1] = line, other
+                else:
+                    uv[at, 0], uv[at, 1] = other, line
+                kind[at] = axis
+                keys[at] = (efeat[b, k] << 22) | (axis << 21) | line | CROSSING_KEY
+                body[at] = b
+                at += 1
+    return uv[:at], kind[:at], keys[:at], body[:at], True
+
+
+@kernel
+def _grow(a, size):
+    out = np.empty(size)
+    out[:len(a)] = a
+    return out
+
+
+@kernel
+def _grow_int(a, size):
+    out = np.empty(size, np.int64)
+    out[:len(a)] = a
+    return out
+
+
+@kernel
+def added_points(polygons, counts, vfeat, efeat, entities, nx, nz):
+    """``outline.added_points``: the vertices L' and grid-line crossings M' of every cross-section in order along
+    its outline, with their kinds, keys (entity in the high 32 bits) and bodies, and the outline segments between
+    consecutive points on the grid's footprint. An edge through a grid vertex shrinks every polygon a hair about
+    its centre and tries again (three times; the fourth try accepts it). ``polygons`` is shrunk in place.
+    Returns (uv, kind, keys, body, segments)."""
+    uv, kind, keys, body, ok = _crossings(polygons, counts, vfeat, efeat, True)
+    for attempt in range(3):
+        if ok:
+            break
+        factor = 1.0 - 1e-6 * (attempt + 1)
+        for b in range(len(counts)):
+            cu, cv = _centre(polygons, counts, b)
+            for k in range(polygons.shape[1]):
+                polygons[b, k, 0] = cu + (polygons[b, k, 0] - cu) * factor
+                polygons[b, k, 1] = cv + (polygons[b, k, 1] - cv) * factor
+        uv, kind, keys, body, ok = _crossings(polygons, counts, vfeat, efeat, attempt < 2)
+    n = len(uv)
+    for i in range(n):
+        keys[i] = (entities[body[i]] << 32) | keys[i]
+    nxt = np.empty(n, np.int64)
+    first = 0
+    for i in range(n):  # each point's successor along its outline (the last closes on the first)
+        if i > 0 and body[i] != body[i - 1]:
+            first = i
+        if i + 1 < n and body[i + 1] == body[i]:
+            nxt[i] = i + 1
+        else:
+            nxt[i] = first
+    keep = np.empty(n, np.bool_)
+    remap = np.empty(n, np.int64)
+    kept = 0
+    for i in range(n):
+        keep[i] = (uv[i, 0] >= 0.0) and (uv[i, 0] <= nx - 1) and (uv[i, 1] >= 0.0) and (uv[i, 1] <= nz - 1)
+        remap[i] = kept
+        kept += 1 if keep[i] else 0
+    segments = np.empty((n, 2), np.int64)
+    s = 0
+    for i in range(n):
+        if keep[i] and keep[nxt[i]]:
+            segments[s, 0], segments[s, 1] = remap[i], remap[nxt[i]]
+            s += 1
+    if kept == n:
+        return uv, kind, keys, body, segments[:s]
+    out_uv = np.empty((kept, 2))
+    out_kind = np.empty(kept, np.int8)
+    out_keys = np.empty(kept, np.int64)
+    out_body = np.empty(kept, np.int64)
+    for i in range(n):
+        if keep[i]:
+            r = remap[i]
+            out_uv[r, 0], out_uv[r, 1], out_kind[r], out_keys[r], out_body[r] = uv[i, 0], uv[i, 1], kind[i], \
+                keys[i], body[i]
+    return out_uv, out_kind, out_keys, out_body, segments[:s]
+
+
+# ------------------------------------------------------------------------------------------- edges of D'
+@kernel
+def edge_table(polygons, counts):
+    """``outline.Edges.table`` as (B, V, 9) rows per edge: start u, v; direction; inward normal; c (−∞ on padding,
+    +∞ on every edge of a polygon with fewer than 3 vertices); |e|² (1 where 0); 0 on a real edge, ∞ on padding."""
+    nb, width = polygons.shape[0], polygons.shape[1]
+    table = np.empty((nb, width, 9))
+    for b in range(nb):
+        for k in range(width):
+            valid = k < counts[b]
+            nxt = k + 1 if k + 1 < counts[b] else 0
+            au, av = polygons[b, k, 0], polygons[b, k, 1]
+            eu, ev = polygons[b, nxt, 0] - au, polygons[b, nxt, 1] - av
+            length2 = eu * eu + ev * ev
+            length = math.hypot(eu, ev)
+            real = valid and length > 0.0
+            inv = 1.0 / length if real else 0.0
+            nu, nv = ev * (inv * -1.0), eu * (inv * 1.0)
+            c = nu * au + nv * av if real else -np.inf
+            row = table[b, k]
+            row[0], row[1], row[2], row[3], row[4], row[5] = au, av, eu, ev, nu, nv
+            row[6] = c if counts[b] > 2 else np.inf
+            row[7] = length2 if length2 > 0.0 else 1.0
+            row[8] = 0.0 if valid else np.inf
+    return table
+
+
+@kernel(inline="always")
+def _inside(table, b, u, v, margin):
+    """``outline._inside``: (u, v) inside polygon b by more than ``margin``."""
+    for k in range(table.shape[1]):
+        row = table[b, k]
+        if not ((row[4] * u + row[5] * v) - row[6] > margin):
+            return False
+    return True
+
+
+@kernel(inline="always")
+def _nearest(table, b, u, v):
+    """``outline._nearest``: the point of polygon b's outline nearest to (u, v) (the first of equal distances)."""
+    best, bu, bv = np.inf, 0.0, 0.0
+    first = True
+    for k in range(table.shape[1]):
+        row = table[b, k]
+        ax, ay, ex, ey = row[0], row[1], row[2], row[3]
+        t = min(max(((u - ax) * ex + (v - ay) * ey) / row[7], 0.0), 1.0)
+        fx, fy = ax + t * ex, ay + t * ey
+        dx, dy = fx - u, fy - v
+        dist2 = dx * dx + dy * dy + row[8]
+        if first or dist2 < best:
+            best, bu, bv, first = dist2, fx, fy, False
+    return bu, bv
+
+
+@kernel
+def outline_impulse(uv, body, before, has_before, after, h, alpha, nb):
+    """±α·d(t) for every added point (eq. 2.5–2.7; ``outline.outline_impulse``): N_c(t − 1) is the nearest point
+    of D'(t − 1) (``before``, edge tables); N_c rises by α·d(t) when N_c(t − 1) lies inside D'(t) (``after``),
+    sinks when N_c(t) lay inside D'(t − 1); each body's mean change is taken off its points.
+    Returns (change, raised, lowered)."""
+    m = len(uv)
+    change = np.empty(m)
+    raised = np.zeros(m, np.bool_)
+    lowered = np.zeros(m, np.bool_)
+    total = np.zeros(nb)
+    number = np.zeros(nb, np.int64)
+    for i in range(m):
+        b = body[i]
+        u, v = uv[i, 0], uv[i, 1]
+        if has_before[b]:
+            bu, bv = _nearest(before, b, u, v)
+            raised[i] = _inside(after, b, bu, bv, -ON_OUTLINE)
+            lowered[i] = _inside(before, b, u, v, -ON_OUTLINE)
+        else:
+            bu, bv = u, v
+        d = math.hypot(u - bu, v - bv) * h  # eq. 2.5
+        sign = (1.0 if raised[i] else 0.0) - (1.0 if lowered[i] else 0.0)
+        change[i] = alpha * d * sign  # eq. 2.6 / 2.7
+        total[b] += change[i]
+        number[b] += 1
+    for i in range(m):
+        b = body[i]
+        change[i] = change[i] - total[b] / max(number[b], 1)
+    return change, raised, lowered
+
+
+# ------------------------------------------------------------------------------------------------ coupling
+@kernel
+def solid_vertices(table, counts, nx, nz):
+    """``outline.solid_vertices``: grid vertices strictly inside a cross-section by scanlines (body, row,
+    column order). Returns (flat vertex index, body index)."""
+    nb, width = table.shape[0], table.shape[1]
+    cap = 64
+    flat = np.empty(cap, np.int64)
+    owner = np.empty(cap, np.int64)
+    n = 0
+    for b in range(nb):
+        if counts[b] < 3:
+            continue
+        low, high = np.inf, -np.inf
+        for k in range(width):
+            if table[b, k, 8] == 0.0:
+                low = min(low, table[b, k, 1])
+                high = max(high, table[b, k, 1])
+        lo = np.int64(max(math.ceil(low), 0.0))
+        hi = np.int64(min(math.floor(high), nz - 1.0))
+        for row in range(lo, hi + 1):
+            left, right = np.inf, -np.inf
+            for k in range(width):
+                r = table[b, k]
+                dv = r[3]
+                if dv == 0.0 or r[8] != 0.0:
+                    continue
+                t = (row - r[1]) / dv
+                if t >= 0.0 and t < 1.0:
+                    u = r[0] + t * r[2]
+                    left = min(left, u)
+                    right = max(right, u)
+            if not (left < np.inf and right > -np.inf):
+                continue
+            first = np.int64(max(math.floor(left + 1e-9) + 1, 0.0))
+            last = np.int64(min(math.ceil(right - 1e-9) - 1, nx - 1.0))
+            if last - first + 1 > 0 and n + last - first + 1 > cap:
+                cap = 2 * (n + last - first + 1)
+                flat, owner = _grow_int(flat, cap), _grow_int(owner, cap)
+            for i in range(first, last + 1):
+                flat[n] = row * nx + i
+                owner[n] = b
+                n += 1
+    return flat[:n], owner[:n]
+
+
+@kernel
+def solid_mask(solid, shape_z, shape_x):
+    """The grid's mask of the vertices inside bodies and their flat indices once each, ascending."""
+    mask = np.zeros((shape_z, shape_x), np.bool_)
+    flat = mask.ravel()
+    for i in range(len(solid)):
+        flat[solid[i]] = True
+    unique = np.sort(solid)
+    n = 0
+    for i in range(len(unique)):
+        if i == 0 or unique[i] != unique[i - 1]:
+            unique[n] = unique[i]
+            n += 1
+    return mask, unique[:n]
+
+
+@kernel
+def grid_pairs(uv, solid, nx, nz):
+    """Grid vertices within radius h of the added points (eq. 2.11; ``outline.coupling_pairs``), the corners of
+    each point's square that are water: (vertex, point, weight r_k / h = 1 − distance / h), point by point."""
+    m = len(uv)
+    g = np.empty(4 * m, np.int64)
+    p = np.empty(4 * m, np.int64)
+    w = np.empty(4 * m)
+    s = solid.ravel()
+    n = 0
+    for i in range(m):
+        u, v = uv[i, 0], uv[i, 1]
+        fu, fv = math.floor(u), math.floor(v)
+        base = np.int64(fv) * nx + np.int64(fu)
+        for c in range(4):
+            cu = fu + (c & 1)
+            cv = fv + (c >> 1)
+            du, dv = cu - u, cv - v
+            dist = math.sqrt(du * du + dv * dv)
+            if dist < 1.0 and cu < nx and cv < nz:
+                vertex = base + (c & 1) + (c >> 1) * nx
+                if not s[vertex]:
+                    g[n], p[n], w[n] = vertex, i, 1.0 - dist
+                    n += 1
+    return g[:n], p[:n], w[:n]
+
+
+@kernel
+def point_pairs(uv, nx, nz):
+    """Pairs of added points within radius h (eq. 2.12; ``outline.coupling_pairs``), both directions, in numpy's
+    order: the full distance matrix row by row up to 96 points, else each point against its own square and half
+    of the 8 around it (points sorted by square), then the same pairs reversed. Returns (point, point, weight)."""
+    m = len(uv)
+    if m <= DENSE_PAIRS:
+        a = np.empty(m * m, np.int64)
+        b = np.empty(m * m, np.int64)
+        w = np.empty(m * m)
+        n = 0
+        for i in range(m):
+            for j in range(m):
+                if i == j:
+                    continue
+                du, dv = uv[i, 0] - uv[j, 0], uv[i, 1] - uv[j, 1]
+                dd = math.sqrt(du * du + dv * dv)
+                if dd < 1.0:
+                    a[n], b[n], w[n] = i, j, 1.0 - dd
+                    n += 1
+        return a[:n], b[:n], w[:n]
+    stride = nx + 3
+    cell = np.empty(m, np.int64)
+    for i in range(m):
+        cell[i] = (np.int64(math.floor(uv[i, 1])) + 1) * stride + np.int64(math.floor(uv[i, 0])) + 1
+    order = np.argsort(cell, kind="mergesort")
+    sorted_cell = cell[order]
+    offsets = np.array([0, 1, stride - 1, stride, stride + 1], np.int64)
+    cap = 16 * m
+    a = np.empty(cap, np.int64)
+    b = np.empty(cap, np.int64)
+    w = np.empty(cap)
+    n = 0
+    for i in range(m):
+        for around in range(5):
+            want = cell[i] + offsets[around]
+            lo = np.searchsorted(sorted_cell, want)
+            hi = lo
+            while hi < m and sorted_cell[hi] == want:
+                hi += 1
+            for pos in range(lo, hi):
+                j = order[pos]
+                du, dv = uv[i, 0] - uv[j, 0], uv[i, 1] - uv[j, 1]
+                dd = math.sqrt(du * du + dv * dv)
+                if dd < 1.0 and (around > 0 or i < j):
+                    if n == cap:
+                        cap *= 2
+                        a, b, w = _grow_int(a, cap), _grow_int(b, cap), _grow(w, cap)
+                    a[n], b[n], w[n] = i, j, 1.0 - dd
+                    n += 1
+    out_a = np.empty(2 * n, np.int64)
+    out_b = np.empty(2 * n, np.int64)
+    out_w = np.empty(2 * n)
+    out_a[:n], out_a[n:] = a[:n], b[:n]
+    out_b[:n], out_b[n:] = b[:n], a[:n]
+    out_w[:n], out_w[n:] = w[:n], w[:n]
+    return out_a, out_b, out_w
+
+
+# ---------------------------------------------------------------------------------------------- propagation
+@kernel
+def wave_grid(z, zp, k, coefficient, new):
+    """Eq. 2.8 on the whole grid in one pass: new = (2 − n·k)·z − z(t − 1) + k·z_left + k·z_right + k·z_up +
+    k·z_down (``waves.propagate``'s seven passes, the same additions in the same order; neighbours beyond the
+    border are absent: reflecting borders, eq. 2.9 / 2.10). ``new`` may be ``zp``."""
+    nz, nx = z.shape
+    for j in range(nz):
+        up, down = j > 0, j < nz - 1
+        for i in range(nx):
+            s = coefficient[j, i] * z[j, i] - zp[j, i]
+            if i > 0:
+                s += z[j, i - 1] * k
+            if i < nx - 1:
+                s += z[j, i + 1] * k
+            if up:
+                s += z[j - 1, i] * k
+            if down:
+                s += z[j + 1, i] * k
+            new[j, i] = s
+
+
+@kernel
+def wave_step(z, zp, k, coefficient, degree, solid, mask, g, p, w, a, b, w2, points, points_prev, new):
+    """One step of eq. 2.8–2.12 (``waves.propagate``): the grid by :func:`wave_grid` into ``new`` (may be ``zp``),
+    then the water vertices next to bodies (``solid``: they lose those neighbours, the wave reflects) or to added
+    points (pairs ``g``, ``p``, ``w``) again with their own neighbours (eq. 2.11, k lowered to 2/D where the added
+    neighbours raise the sum of weights D above 4), and the added points from the grid vertices and points within
+    radius h (eq. 2.12; point pairs ``a``, ``b``, ``w2``). Returns the added points' heights at t + 1."""
+    nz, nx = z.shape
+    zf, zpf, mf = z.ravel(), zp.ravel(), mask.ravel()
+    # eq. 2.11: per touched vertex, its extra sums in order of entry (solid neighbours first, then point pairs)
+    entries = 4 * len(solid) + len(g)
+    vertex = np.empty(entries, np.int64)
+    slot = np.full(z.size, -1, np.int64) if entries > 0 else np.empty(0, np.int64)
+    s_extra = np.empty(entries)
+    d_extra = np.empty(entries)
+    u = 0
+    for q in range(len(solid)):
+        c = solid[q]
+        ci, cj = c % nx, c // nx
+        held = -zf[c]
+        for nb in range(4):
+            if nb == 0:
+                if ci + 1 >= nx:
+                    continue
+                t = c + 1
+            elif nb == 1:
+                if ci == 0:
+                    continue
+                t = c - 1
+            elif nb == 2:
+                if cj + 1 >= nz:
+                    continue
+                t = c + nx
+            else:
+                if cj == 0:
+                    continue
+                t = c - nx
+            if mf[t]:
+                continue
+            if slot[t] < 0:
+                slot[t] = u
+                vertex[u] = t
+                s_extra[u] = 0.0
+                d_extra[u] = 0.0
+                u += 1
+            s_extra[slot[t]] += held
+            d_extra[slot[t]] += -1.0
+    for q in range(len(g)):
+        t = g[q]
+        if slot[t] < 0:
+            slot[t] = u
+            vertex[u] = t
+            s_extra[u] = 0.0
+            d_extra[u] = 0.0
+            u += 1
+        s_extra[slot[t]] += w[q] * points[p[q]]
+        d_extra[slot[t]] += w[q]
+    special = np.empty(u)
+    for q in range(u):
+        c = vertex[q]
+        ci, cj = c % nx, c // nx
+        s = 0.0
+        s += zf[c + 1] if ci + 1 < nx else 0.0
+        s += zf[c - 1] if ci > 0 else 0.0
+        s += zf[c + nx] if cj + 1 < nz else 0.0
+        s += zf[c - nx] if cj > 0 else 0.0
+        s = s + s_extra[q]
+        d = degree.ravel()[c] + d_extra[q]
+        zt = zf[c]
+        if d <= 1e-12:
+            special[q] = zt
+        else:
+            kt = min(k, 2.0 / d)
+            special[q] = 2.0 * zt - zpf[c] + kt * (s - d * zt)
+    m = len(points)  # eq. 2.12 at the added points, before the grid pass overwrites z(t − 1)
+    grid_s = np.zeros(m)
+    grid_d = np.zeros(m)
+    for q in range(len(g)):
+        grid_s[p[q]] += w[q] * zf[g[q]]
+        grid_d[p[q]] += w[q]
+    pair_s = np.zeros(m)
+    pair_d = np.zeros(m)
+    for q in range(len(a)):
+        pair_s[a[q]] += w2[q] * points[b[q]]
+        pair_d[a[q]] += w2[q]
+    new_points = np.empty(m)
+    for i in range(m):
+        s = grid_s[i] + pair_s[i]
+        d = grid_d[i] + pair_d[i]
+        if d <= 0.0:
+            new_points[i] = points[i]
+        else:
+            kn = min(k, 2.0 / d)
+            new_points[i] = 2.0 * points[i] - points_prev[i] + kn * (s - d * points[i])
+    wave_grid(z, zp, k, coefficient, new)
+    nf = new.ravel()
+    for q in range(u):
+        nf[vertex[q]] = special[q]
+    return new_points
+
+
+# ----------------------------------------------------------------------------------------------- carried
+@kernel
+def carried(known, known_heights, known_previous, keys, uv, z, zp):
+    """``surface._carried``: N_z(t), N_z(t − 1) of the added points by key from the last step, or lifted onto the
+    surface (eq. 2.2–2.4) for new points."""
+    nz, nx = z.shape
+    zf, zpf = z.ravel(), zp.ravel()
+    m = len(keys)
+    heights = np.empty(m)
+    previous = np.empty(m)
+    order = np.argsort(known)
+    sorted_keys = known[order]
+    for i in range(m):
+        at = np.searchsorted(sorted_keys, keys[i]) if len(known) else 0
+        if len(known) and at < len(known) and sorted_keys[at] == keys[i]:
+            heights[i] = known_heights[order[at]]
+            previous[i] = known_previous[order[at]]
+        else:
+            heights[i] = _bilinear(zf, nx, nz, uv[i, 0], uv[i, 1])
+            previous[i] = _bilinear(zpf, nx, nz, uv[i, 0], uv[i, 1])
+    return heights, previous
+
+
+# --------------------------------------------------------------------------------------------- finishing
+@kernel
+def finish(z, new, solid, owner, levels, unique, volume, damping, new_points, change, heights):
+    """The end of an outline step (``surface._outline_step`` and ``step_water``): the added points' waves
+    (eq. 2.6 / 2.7 as displacements), the vertices inside bodies held at S' (no velocity), the water's volume
+    kept (both time levels shifted back to the mean at the start of the step) and the damping of section 2.3.2
+    about the mean level. ``new_points`` is updated in place; returns the added points' heights at t (their
+    history, shifted like the grid)."""
+    for i in range(len(new_points)):
+        new_points[i] += change[i]
+    previous_points = np.empty(len(heights))
+    for i in range(len(heights)):
+        previous_points[i] = heights[i] + change[i]
+    zf, nf = z.ravel(), new.ravel()
+    for q in range(len(solid)):
+        held = levels[owner[q]]
+        nf[solid[q]] = held
+        zf[solid[q]] = held
+    mean = water_mean(new, unique)
+    shift = volume - mean
+    if shift != 0.0:
+        for c in range(zf.size):
+            zf[c] += shift
+        for i in range(len(previous_points)):
+            previous_points[i] = previous_points[i] + shift
+    if damping < 1.0:
+        offset = volume - damping * mean
+        for c in range(nf.size):
+            nf[c] = nf[c] * damping + offset
+        for i in range(len(new_points)):
+            new_points[i] = volume + damping * (new_points[i] - mean)
+    elif shift != 0.0:
+        for c in range(nf.size):
+            nf[c] += shift
+        for i in range(len(new_points)):
+            new_points[i] = new_points[i] + shift
+    return previous_points
