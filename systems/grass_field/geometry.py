@@ -262,7 +262,8 @@ def _ring_vertices(nodes: np.ndarray, radius: np.ndarray, side: np.ndarray, side
 
 
 def _tube_indices(start: int, tubes: int, rings: int, sides: int) -> np.ndarray:
-    """Triangles between consecutive rings of ``tubes`` tubes laid out as (tube, ring, side)."""
+    """Triangles between consecutive rings of ``tubes`` tubes laid out as (tube, ring, side), wound
+    counter-clockwise seen from outside (the front faces face out: a tube can be drawn with back faces culled)."""
     b, i, j = np.meshgrid(np.arange(tubes), np.arange(rings - 1), np.arange(sides), indexing="ij")
     base = start + (b * rings + i) * sides
     j1 = (j + 1) % sides
@@ -316,7 +317,8 @@ def _mesh_vertices(p: LevelParts, dims: _Dims) -> np.ndarray:
 
 
 def _mesh_indices(dims: _Dims) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(triangles, lines, points) index lists of the shared layout."""
+    """(triangles, lines, points) index lists of the shared layout; the tubes' triangles come first (see
+    :func:`_tube_triangles`)."""
     blocks = dims.blocks()
     tris, lines = [], []
     if dims.sides:
@@ -333,6 +335,14 @@ def _mesh_indices(dims: _Dims) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     points = np.arange(blocks["dots"][0], blocks["dots"][0] + dims.dots)
     cat = lambda parts: np.concatenate(parts).astype(np.int32) if parts else np.zeros(0, np.int32)  # noqa: E731
     return cat(tris), cat(lines), points.astype(np.int32)
+
+
+def _tube_triangles(dims: _Dims) -> int:
+    """How many triangles at the start of :func:`_mesh_indices`'s list belong to the closed tubes (levels 0-1:
+    the stem and the branches below the blade)."""
+    if not dims.sides:
+        return 0
+    return (dims.stem - 1) * dims.sides * 2 + dims.branches * max(dims.lower - 1, 0) * dims.sides * 2
 
 
 def level_geometry(skel: PlantSkeleton, cfg: GrassFieldConfig, level: int) -> tuple[np.ndarray, np.ndarray,
@@ -358,6 +368,7 @@ class LevelMesh:
     real_triangles: np.ndarray  # (V,) non-degenerate triangles per variant
     real_lines: np.ndarray  # (V,)
     real_points: np.ndarray  # (V,)
+    tube_triangles: int = 0  # the first triangles: tube sides, wound counter-clockwise seen from outside
 
     @property
     def real_primitives(self) -> np.ndarray:
@@ -399,7 +410,7 @@ def build_level_meshes(cfg: GrassFieldConfig, state: GrassFieldState) -> list[Le
         meshes.append(LevelMesh(level, verts, tris, lines, points,
                                 np.array([_real_triangles(v, tris) for v in v64]),
                                 np.array([_real_lines(v, lines) for v in v64]),
-                                np.array([len(p.dots) for p in parts])))
+                                np.array([len(p.dots) for p in parts]), _tube_triangles(dims)))
     return meshes
 
 

@@ -81,6 +81,15 @@ def plant_texels(position: np.ndarray, yaw: np.ndarray, scale: np.ndarray, varia
     return out.reshape(-1, 4)
 
 
+def _mesh_draws(kind: str, mode: int, count: int, tubes: int) -> list[tuple[str, int, int, int, bool]]:
+    """The draws of one index buffer: the closed tubes' ``tubes`` leading indices with back faces culled (half
+    of their triangles never reach the rasteriser), then the rest (two-sided leaves, lines, dots) unculled."""
+    draws = [(kind, mode, 0, tubes, True)] if tubes else []
+    if count > tubes:
+        draws.append((kind, mode, tubes, count - tubes, False))
+    return draws
+
+
 @dataclass
 class FieldFrame:
     """One field as extracted for this frame."""
@@ -125,16 +134,20 @@ class FieldGpu:
         # the plants drawn this frame, all geometric levels one after the other (rewritten row by row per frame)
         self.list_tex = _data_texture(ctx, np.zeros((max(1, len(placed.plant_position)), 1), np.int32), dtype="i4")
         self._list_upload = np.zeros(self.list_tex.width * self.list_tex.height, np.int32)
-        # per level: one vertex texture for all variants, one shared index buffer per primitive type
+        # per level: one vertex texture for all variants, one shared index buffer per primitive type, and the
+        # draws of each level: (kind, mode, first index, index count, cull back faces)
         self.mesh_tex: dict[int, tuple[moderngl.Texture, int]] = {}
-        self.meshes: dict[tuple[int, str], tuple[moderngl.Buffer, int, int]] = {}
+        self.meshes: dict[tuple[int, str], moderngl.Buffer] = {}
+        self.mesh_draws: dict[int, list[tuple[str, int, int, int, bool]]] = {}
         for mesh in data.meshes:
             self.mesh_tex[mesh.level] = (_data_texture(ctx, mesh.vertices.reshape(-1, 4)), mesh.vertices.shape[1])
+            self.mesh_draws[mesh.level] = draws = []
             for kind, mode, _ in MESH_KINDS:
                 index = getattr(mesh, kind)
                 if len(index):
-                    ibo = ctx.buffer(np.ascontiguousarray(index, dtype=np.int32).tobytes())
-                    self.meshes[(mesh.level, kind)] = (ibo, len(index), mode)
+                    self.meshes[(mesh.level, kind)] = ctx.buffer(np.ascontiguousarray(index, dtype=np.int32).tobytes())
+                    draws.extend(_mesh_draws(kind, mode, len(index), 3 * mesh.tube_triangles if kind == "triangles"
+                                             else 0))
         # level 4: the LOD cache
         self.frame = tile_frame(cfg.cell_size, data.plant_reach, data.plant_height,
                                 np.radians(cfg.impostor_elevation_deg))
@@ -184,7 +197,7 @@ class FieldGpu:
         vao = self._vaos.get(key)
         if vao is None:
             if what[0] == "mesh":
-                ibo = self.meshes[what[1:]][0]
+                ibo = self.meshes[what[1:]]
                 vao = self.ctx.vertex_array(prog, [], index_buffer=ibo, index_element_size=4)
             elif what[0] == "impostor":  # i_level feeds only the debug view: absent from the other variants
                 vao = self.ctx.vertex_array(prog, [(self.impostor_buf, "3f 1f 2f 1f 1f /i", "i_centre", "i_face",
@@ -226,12 +239,14 @@ class FieldGpu:
         tex.use(0)
         prog["mesh_verts"].value = verts
         prog["list_offset"].value = offset
-        for kind, _, _ in MESH_KINDS:
-            entry = self.meshes.get((level, kind))
-            if entry is not None:
-                _, count, mode = entry
-                self._vao(prog, ("mesh", level, kind)).render(mode, vertices=count, instances=plants)
-                self.draw_calls += 1
+        for kind, mode, first, count, cull in self.mesh_draws[level]:
+            if cull:  # closed tubes: the faces turned away from the eye are hidden by those turned towards it
+                self.ctx.front_face, self.ctx.cull_face = "ccw", "back"
+                self.ctx.enable(moderngl.CULL_FACE)
+            self._vao(prog, ("mesh", level, kind)).render(mode, vertices=count, first=first, instances=plants)
+            if cull:
+                self.ctx.disable(moderngl.CULL_FACE)
+            self.draw_calls += 1
 
     # ------------------------------------------------------------------------------- level 4 (cache)
     def _cache_extra(self) -> dict[str, Any]:
@@ -557,7 +572,7 @@ class FieldGpu:
                    self.band_tex, self.band_fbo, getattr(self, "band_depth", None)]
         objects += list(self._vaos.values())  # the programs belong to the renderer (shared between fields)
         objects += [tex for tex, _ in self.mesh_tex.values()]
-        objects += [ibo for ibo, _, _ in self.meshes.values()]
+        objects += list(self.meshes.values())
         for obj in objects:
             if obj is not None:
                 obj.release()

@@ -89,6 +89,26 @@ def test_levels_have_fewer_primitives_and_share_one_layout(paper):
     assert prims[0].mean() > 5 * prims[3].mean()
 
 
+def test_tube_triangles_come_first_and_face_outwards(paper):
+    """Levels 0-1 draw their closed tubes with back faces culled: the leading ``tube_triangles`` triangles must be
+    exactly the tube sides, every real one wound counter-clockwise seen from outside (its normal along the
+    vertices' radial normals), and the rest (two-sided leaves) no tube."""
+    cfg, state = paper
+    meshes = build_level_meshes(cfg, state)
+    assert [m.tube_triangles > 0 for m in meshes] == [True, True, False, False]
+    for m in meshes:
+        tubes = m.triangles[:3 * m.tube_triangles].reshape(-1, 3)
+        rest = m.triangles[3 * m.tube_triangles:]
+        for verts in m.vertices.astype(np.float64):
+            assert np.all(verts[tubes.ravel(), 7] == KIND_TUBE)
+            assert not np.any(verts[rest, 7] == KIND_TUBE)
+            p, n = verts[:, :3], verts[:, 4:7]
+            face = np.cross(p[tubes[:, 1]] - p[tubes[:, 0]], p[tubes[:, 2]] - p[tubes[:, 0]])
+            real = np.linalg.norm(face, axis=1) > 1e-12
+            radial = n[tubes[:, 0]] + n[tubes[:, 1]] + n[tubes[:, 2]]
+            assert np.all(np.einsum("ij,ij->i", face[real], radial[real]) > 0.0)
+
+
 def test_figure1_parameters_shape_the_plant(paper):
     cfg, state = paper
     base = plant_skeleton(cfg, state, 0)
