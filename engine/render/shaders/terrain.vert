@@ -1,26 +1,28 @@
 #version 330
 // Height-field terrain (engine/render/terrain.py).  Diffuse and ambient light times the albedo are baked per
 // grid point into the `shade` texture at the field's full resolution, so a chunk drawn at a coarse level keeps
-// its lighting detail; per vertex remain the small view-dependent specular term and the fog, which vary slowly.
+// its lighting detail; per vertex remain the small view-dependent specular term and the fog, which vary slowly
+// (both folded into v_fogged, see terrain.frag).
 #include "lit.glsl"
 uniform mat4 view_proj;
 uniform mat4 model;
 uniform vec2 uv_scale;   // local (x, z) -> shade texture coordinates, texel centres on the grid points
 uniform vec2 uv_offset;
+uniform float shade_scale;  // the shade texture's encoding scale (terrain.frag squares and scales)
 in vec3 in_position;
 in vec3 in_normal;
 in float in_skirt;  // > 0 on skirt vertices: lowered by this much (hides LOD cracks), keeping the edge's shading
 out vec2 v_uv;
-out vec3 v_specular;
-out float v_fog;
+out vec4 v_fogged;   // rgb: mix(specular, sky_horizon, fog); a: shade_scale · (1 - fog)
 void main() {
     vec4 world = model * vec4(in_position, 1.0);
     vec3 n = normalize(mat3(model) * in_normal);
     vec3 h = normalize(normalize(camera_pos - world.xyz) + sun_dir);
     float spec = max(dot(n, h), 0.0);
     spec *= spec; spec *= spec; spec *= spec; spec *= spec;  // ^16, lit.glsl's shininess for terrain
-    v_specular = sun_color * (spec * 0.03 * max(dot(n, sun_dir), 0.0));
-    v_fog = clamp(1.0 - exp(-length(camera_pos - world.xyz) * fog_density), 0.0, 1.0);
+    vec3 specular = sun_color * (spec * 0.03 * max(dot(n, sun_dir), 0.0));
+    float fog = clamp(1.0 - exp(-length(camera_pos - world.xyz) * fog_density), 0.0, 1.0);
+    v_fogged = vec4(mix(specular, sky_horizon, fog), shade_scale * (1.0 - fog));
     v_uv = in_position.xz * uv_scale + uv_offset;
     world.y -= in_skirt;
     gl_Position = view_proj * world;
