@@ -217,3 +217,66 @@ def gather_in_box(position, pattern, count, extra, lo, hi, out) -> int:  # pragm
         out[k, 2] = extra[i, 2]
         k += _inside(extra, i, lo, hi)
     return k
+
+
+@kernel
+def advance_particles(position, velocity, age, pattern, count, dt, hold_irregular):  # pragma: no cover
+    """One pass over an emitter's live particles at the start of a step: age += dt; the beam particles
+    (``pattern`` < 0) listed with their positions before the move (their swept segments start there); every
+    particle moved x += v·dt except, when ``hold_irregular``, the irregular ones (``pattern`` >= 0 and odd), which
+    are listed instead: eq. 3.5 first steers them from their unmoved positions (then :func:`move_rows`).
+
+    Returns (beam slots, their start positions (b, 3), irregular slots), slots ascending."""
+    beam = np.empty(count, dtype=np.int64)
+    start = np.empty((count, 3))
+    irregular = np.empty(count if hold_irregular else 0, dtype=np.int64)
+    b = 0
+    r = 0
+    for i in range(count):
+        age[i] += dt
+        code = pattern[i]
+        if code < 0:
+            beam[b] = i
+            start[b, 0] = position[i, 0]
+            start[b, 1] = position[i, 1]
+            start[b, 2] = position[i, 2]
+            b += 1
+        elif hold_irregular and code & 1 == 1:
+            irregular[r] = i
+            r += 1
+            continue
+        position[i, 0] += velocity[i, 0] * dt
+        position[i, 1] += velocity[i, 1] * dt
+        position[i, 2] += velocity[i, 2] * dt
+    return beam[:b].copy(), start[:b].copy(), irregular[:r].copy()
+
+
+@kernel
+def move_rows(position, velocity, rows, dt):  # pragma: no cover
+    """x += v·dt for the particles ``rows`` (the irregular ones, once steered)."""
+    for i in rows:
+        position[i, 0] += velocity[i, 0] * dt
+        position[i, 1] += velocity[i, 1] * dt
+        position[i, 2] += velocity[i, 2] * dt
+
+
+@kernel
+def dead_moves(age, lifetime, count):  # pragma: no cover
+    """The particles whose life is over (age > lifetime + 1e-9) and how the buffer closes their gaps: returns
+    (dead count, holes, movers): the dead slots below the new count ``count − dead`` (ascending) and as many live
+    slots at or above it (ascending), which move into them in that order."""
+    dead = 0
+    for i in range(count):
+        dead += age[i] > lifetime[i] + 1e-9
+    keep = count - dead
+    holes = np.empty(dead + 1, dtype=np.int64)  # one spare slot: each index is written, then kept or overwritten
+    movers = np.empty(dead + 1, dtype=np.int64)
+    h = 0
+    for i in range(keep):  # branch-free: which particles died is data, a branch on it mispredicts
+        holes[h] = i
+        h += age[i] > lifetime[i] + 1e-9
+    m = 0
+    for i in range(keep, count):
+        movers[m] = i
+        m += not age[i] > lifetime[i] + 1e-9
+    return dead, holes[:h].copy(), movers[:m].copy()

@@ -42,7 +42,7 @@ from engine.noise import PerlinNoise
 from engine.spatial import Transform, quat_rotate, quat_to_matrix
 from engine.world import World
 
-from .kernels import gather_in_box
+from .kernels import advance_particles, dead_moves, gather_in_box, move_rows
 from .neighbours import grouped_repulsion
 
 F64 = NDArray[np.float64]
@@ -307,22 +307,16 @@ class _Scratch:
 _SCRATCH = _Scratch()
 
 
-def _remove_dead(buf: ParticleBuffer, dead: NDArray[np.bool_]) -> int:
-    """Remove particles flagged ``dead`` (over the live range) by moving live tail particles into their slots."""
-    n = buf.count
-    gone = dead.nonzero()[0]
-    if gone.size == 0:
-        return 0
-    keep = n - gone.size
-    holes = gone[: int(np.searchsorted(gone, keep))]  # ascending: the dead slots below the new count
+def _remove_dead(buf: ParticleBuffer) -> int:
+    """Remove the particles whose life is over (age > lifetime) by moving live tail particles into their slots
+    (:func:`.kernels.dead_moves`); returns how many died."""
+    dead, holes, movers = dead_moves(buf.age, buf.lifetime, buf.count)
     if holes.size:  # as many live particles above the new count move down into them
-        movers = np.logical_not(dead[keep:n]).nonzero()[0]
-        movers += keep
         for array in buf.arrays():  # loop over the particle arrays; (n, 3) ones moved as 24-byte records
             flat = _rows(array) if array.ndim == 2 else array
             flat.put(holes, flat.take(movers))
-    buf.count = keep
-    return int(gone.size)
+    buf.count -= dead
+    return int(dead)
 
 
 def _emission_count(cfg: EnergyWaveEmitter, state: EnergyWaveState, dt: float) -> int:
@@ -590,14 +584,11 @@ def _send_events(world: World, emitter: int, colliders: list[ColliderEntry], whi
         world.events.send(EnergyWaveHit(emitter, target, at, nn, i, energy, count, trigger))
 
 
-def _steer_irregular(cfg: EnergyWaveEmitter, state: EnergyWaveState, transform: Transform, dt: float) -> None:
-    """Irregular particles aim at their control point so that they arrive when τ runs out (eq. 3.5)."""
-    if not cfg.control_points:
-        return
+def _steer_irregular(cfg: EnergyWaveEmitter, state: EnergyWaveState, transform: Transform, irregular: NDArray[np.int64],
+                     dt: float) -> None:
+    """Irregular particles (slots ``irregular``) aim at their control point so that they arrive when τ runs out
+    (eq. 3.5)."""
     buf = state.particles
-    irregular = np.flatnonzero(is_irregular(buf.pattern[: buf.count]))
-    if irregular.size == 0:
-        return
     local = control_point_offsets(cfg, state.time, _noise(state))
     world_offsets = quat_rotate(transform.rotation, local)
     control = np.minimum(buf.control[irregular], len(local) - 1)  # the config may have lost points since
@@ -612,12 +603,12 @@ def _advance(e: _Emitter, dt: float) -> None:
     if buf.capacity != e.cfg.max_particles:
         buf.grow(e.cfg.max_particles)
     e.state.time += dt
-    n = buf.count
-    buf.age[:n] += dt
-    _steer_irregular(e.cfg, e.state, e.transform, dt)
-    e.beam = np.flatnonzero(buf.pattern[:n] == BEAM)
-    e.start = _take_rows(buf.position, e.beam)  # a copy
-    buf.position[:n] += np.multiply(buf.velocity[:n], dt, out=_SCRATCH.get("move", (n, 3)))
+    steer = bool(e.cfg.control_points)  # without control points irregular particles keep their velocity
+    e.beam, e.start, irregular = advance_particles(buf.position, buf.velocity, buf.age, buf.pattern, buf.count, dt,
+                                                   steer)
+    if irregular.size:
+        _steer_irregular(e.cfg, e.state, e.transform, irregular, dt)
+        move_rows(buf.position, buf.velocity, irregular, dt)
 
 
 def _penetration(end: F64, rows: NDArray[np.int64], which: NDArray[np.int64],
@@ -677,9 +668,7 @@ def _step(world: World, emitters: list[_Emitter], dt: float) -> None:
         _advance(e, dt)
     _collide(world, emitters)
     for e in emitters:  # loop over emitters
-        buf = e.state.particles
-        n = buf.count
-        _remove_dead(buf, buf.age[:n] > np.add(buf.lifetime[:n], 1e-9, out=_SCRATCH.get("life", (n,))))
+        _remove_dead(e.state.particles)
     _emit(emitters, dt)
 
 

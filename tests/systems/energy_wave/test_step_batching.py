@@ -132,10 +132,12 @@ def test_row_helpers_and_dead_removal_match_fancy_indexing():
         buf.count = 40
         for a in buf.arrays():
             a[...] = rng.integers(0, 100, a.shape).astype(a.dtype)
-        before = [a[:40].copy() for a in buf.arrays()]
         dead = np.zeros(40, dtype=bool)
         dead[dead_at] = True
-        assert _remove_dead(buf, dead) == 4
+        buf.lifetime[:40] = 50.0
+        buf.age[:40] = np.where(dead, 50.0 + 2e-9, 50.0 + 1e-9)  # dead: age > lifetime + 1e-9 (not merely >=)
+        before = [a[:40].copy() for a in buf.arrays()]
+        assert _remove_dead(buf) == 4
         assert buf.count == 36
         source = np.arange(36)  # each slot below the new count keeps its particle, or takes the next live mover
         kept = np.flatnonzero(~dead)
@@ -163,3 +165,24 @@ def test_gather_in_box_equals_the_numpy_selection():
     assert 0 < len(expected) < 330
     assert found == len(expected)
     assert np.array_equal(out[:found], expected)
+
+
+def test_advance_kernel_equals_the_numpy_update():
+    """age += dt, beam rows with their unmoved positions, x += v·dt for all but the held irregular particles."""
+    from systems.energy_wave.kernels import advance_particles, move_rows
+
+    rng = np.random.default_rng(21)
+    position, velocity, age = rng.standard_normal((50, 3)), rng.standard_normal((50, 3)), rng.random(50)
+    pattern = rng.integers(-1, 8, 50).astype(np.int8)
+    for hold in (False, True):
+        p, a = position.copy(), age.copy()
+        beam, start, irregular = advance_particles(p, velocity, a, pattern, 40, 1.0 / 60.0, hold)
+        assert np.array_equal(beam, np.flatnonzero(pattern[:40] < 0))
+        assert np.array_equal(start, position[beam])
+        expected_irregular = np.flatnonzero((pattern[:40] >= 0) & (pattern[:40] % 2 == 1)) if hold else []
+        assert np.array_equal(irregular, expected_irregular)
+        move_rows(p, velocity, irregular, 1.0 / 60.0)
+        moved = position.copy()
+        moved[:40] += velocity[:40] * (1.0 / 60.0)
+        assert np.array_equal(p, moved)
+        assert np.array_equal(a[:40], age[:40] + 1.0 / 60.0) and np.array_equal(a[40:], age[40:])
