@@ -50,7 +50,7 @@ from systems.dust_devil.simulate import marker_points, world_positions
 SHADERS = Path(__file__).parent / "shaders"
 LOG = logging.getLogger(__name__)
 MARKER_COLOR = (0.9, 0.06, 0.04)
-MARKER_SEGMENTS = (6, 10)  # stacks, slices: 120 triangles a marker (the engine's sphere has 480); they stay small
+MARKER_SEGMENTS = (8, 12)  # stacks, slices: 192 triangles a marker (the engine's sphere has 480); they stay small
 
 
 @dataclass
