@@ -6,7 +6,8 @@ Paper (section 5; Xeon 2.53 GHz, Visual C++, a 2012 GPU): 63 x 63 terrain at spa
 particles drawn as 7,000-10,000 pseudo-particles, 640 x 480 accumulation images, 16 per time step: 13-17 fps.
 Here: the same workload headless (EGL; Mesa llvmpipe on a machine without a GPU), one fixed simulation step per
 frame, timed wall-clock with glFinish (median and best frame) and in process CPU time (all of llvmpipe's threads;
-steadier than wall time when other jobs share the machine); then the numpy step alone for 100k particles.
+steadier than wall time when other jobs share the machine); then the simulation step alone for 100k particles
+(the compiled particle kernel, systems/dust_devil/kernels.py, beside the numpy step it replaces: --numpy-step).
 """
 
 from __future__ import annotations
@@ -144,7 +145,7 @@ def bench_render(label: str, width: int, height: int, particles: int, cameras: s
 
 
 def bench_step(particles: int, extra: str, steps: int = 10, rounds: int = 3) -> float:
-    """One fixed step in ms: the best of ``rounds`` rounds of CPU time (numpy runs on one thread)."""
+    """One fixed step in ms: the best of ``rounds`` rounds of CPU time (the step runs on one thread)."""
     app = make_app(320, 240, particles, "", extra + "\nprewarm_time = 0.0")
     app.step(2)
     best = float("inf")
@@ -162,6 +163,8 @@ def main() -> int:
     parser.add_argument("--passes", action="store_true", help="per-pass CPU times of the one-view workload")
     parser.add_argument("--scatter-stage", choices=("auto", "vertex"), default="auto",
                         help="vertex: the PBVR scatter in the vertex stage even where compute shaders run (A/B)")
+    parser.add_argument("--numpy-step", action="store_true",
+                        help="also time the numpy particle step the compiled kernel replaces (A/B)")
     args = parser.parse_args()
     global SCATTER_STAGE
     SCATTER_STAGE = args.scatter_stage
@@ -186,11 +189,20 @@ def main() -> int:
                               "pbvr = false")
         print(f"  PBVR cost (CPU per frame - the same with PBVR off): R = 16 {1e3 * (cpu - off):5.1f} ms, "
               f"R = 4 {1e3 * (drag - off):5.1f} ms = {1e6 * (cpu - off) / (5000 * 2 * 16):.3f} us per pseudo-particle")
-    print("simulation step (numpy, one fixed step, terrain on; CPU time, best of 3 rounds):")
+    from systems.dust_devil import simulate
+
+    kinds = [("compiled", True)] + ([("numpy", False)] if args.numpy_step else [])
+    print("simulation step (one fixed step, terrain on; CPU time, best of 3 rounds; "
+          + " / ".join(k for k, _ in kinds) + "):")
     for label, extra in [("nearest + midpoint (default)", ""), ("nearest + euler (paper's step)", 'integrator = "euler"'),
                          ("trilinear + midpoint", 'lookup = "trilinear"')]:
         for n in (5000, 100_000):
-            print(f"  {n:>7d} particles, {label:<32s} {bench_step(n, extra):7.2f} ms")
+            figures = []
+            for _, use in kinds:
+                simulate.USE_KERNELS = use
+                figures.append(f"{bench_step(n, extra):7.2f}")
+            simulate.USE_KERNELS = True
+            print(f"  {n:>7d} particles, {label:<32s} {' / '.join(figures)} ms")
     return 0
 
 
