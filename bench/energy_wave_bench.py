@@ -7,8 +7,8 @@ case 1: 1221 particles / 1221 textures 85.1 fps; case 2: 2410 / 2410 31.3 fps; c
 case 4: 2410 / 12050 10.4 fps. Here: the same workload headless (EGL; Mesa llvmpipe without a GPU), continuous
 emission at the rate that keeps that many particles alive, one fixed step per frame, 1280 x 720, timed wall-clock
 with glFinish. Cases 1-2 draw grains (1 sprite each), cases 3-4 trails and bars of 5 sprites (M = N = 5) expanded on
-the GPU; the beam is kept short so nearly every particle is a splash particle. Then the numpy step alone for 10k and
-100k live particles.
+the GPU; the beam is kept short so nearly every particle is a splash particle. Then the simulation step alone (numpy
+and the effect's numba kernels) for 10k and 100k live particles.
 """
 
 from __future__ import annotations
@@ -236,8 +236,8 @@ def main(argv: list[str] | None = None) -> int:
     if render:
         print(energy_wave_pass_times(args.width, args.height, args.frames // 4 + 1))
     print()
-    print("simulation step alone (numpy), continuous emission, beams of 10k particles each (issue target: 100k in "
-          "<= 16 ms):")
+    print("simulation step alone (numpy + numba kernels), continuous emission, beams of 10k particles each "
+          "(issue target: 100k in <= 16 ms):")
     for particles in (10_000, 100_000):
         r = bench_step(particles, args.steps)
         print(f"  {r['particles']:>7} live particles ({r['emitters']} emitters): mean {r['mean_ms']:.2f} ms, "

@@ -1,4 +1,4 @@
-"""Per-step simulation of energy-wave emitters (seeds/000), pure numpy, no GL.
+"""Per-step simulation of energy-wave emitters (seeds/000): numpy, with compiled loops in :mod:`.kernels`; no GL.
 
 One fixed step of one emitter:
 
