@@ -362,28 +362,27 @@ class Renderer:
         """Render stage: declare, compile (cached) and execute the graph; present in a window.
 
         ``overlap`` (the next simulation ticks, :meth:`engine.app.App.render_frame`) runs once while the GPU
-        draws: after the last pass is recorded, the queued work is flushed and the GPU, or a software
-        rasteriser's threads, draw the whole frame while the CPU runs ``overlap``.  The passes use only what
-        render-extract copied, so the picture is the same as when the ticks run after the frame.
-
-        Running it after the last pass rather than at the graph's first read of an earlier output
-        (:attr:`~engine.render.graph.CompiledGraph.sync_pass`) gives the GPU the most queued work to draw
-        while the CPU ticks: a driver orders reads after writes without the CPU waiting (measured on llvmpipe:
-        the demo's overlapped frame 93 ms instead of 118 ms median, 51 instead of 61 ms best, in one loaded
-        process alternating both; docs/performance.md).
+        draws: at the graph's first synchronisation point (the first pass that reads what an earlier one
+        wrote, :attr:`~engine.render.graph.CompiledGraph.sync_pass`) the queued passes are flushed, so the
+        GPU, or a software rasteriser's threads, draw them while the CPU runs ``overlap``.  The passes use
+        only what render-extract copied, so the picture is the same as when the ticks run after the frame.
         """
-        self.declare().execute()
-        if self.screen is not None:
-            self.ctx.copy_framebuffer(self.screen, self._final_fbo)
-        if overlap is not None:
-            gl_flush()
-            overlap()
+        if overlap is None:
+            self.declare().execute()
+        else:
+            def sync() -> None:
+                gl_flush()
+                overlap()
+
+            self.declare().execute(on_sync=sync)
         now = time.perf_counter()
         if self._last_draw is not None:
             self.fps = 0.9 * self.fps + 0.1 / max(now - self._last_draw, 1e-6) if self.fps else 1.0 / (now - self._last_draw)
         self._last_draw = now
         self.timer.frames += 1
         self.frame_index += 1
+        if self.screen is not None:
+            self.ctx.copy_framebuffer(self.screen, self._final_fbo)
 
     def _declare_view_targets(self, graph, view: View) -> None:
         def setup(b):
