@@ -1,10 +1,10 @@
 """The energy-wave render feature: additive billboards expanded on the GPU, plus a glow (bloom) pass.
 
 Per frame, :func:`~systems.energy_wave.extract.extract_frame` packs one record per particle; they are uploaded to
-an RGBA32F texture (three texels a record) and drawn as octagons (the quad with its corners cut where the sprite's
-falloff is 0; a fan of six triangles) with no vertex buffer: per emitter, one draw for single sprites, one for trails
-(18 × particles × M vertices) and one for bars (18 × particles × N); the vertex shader finds its particle, sub-sprite
-and corner from ``gl_VertexID`` (eqs. 3.7–3.9). (Not instanced: llvmpipe runs its vertex pipeline once per instance,
+an RGBA32F texture (three texels a record) and drawn as camera-facing quads (two triangles over four corners, an
+index buffer so that each corner is shaded once) with no vertex attributes: per emitter, one draw for single sprites,
+one for trails (6 indices × particles × M) and one for bars (6 × particles × N); the vertex shader finds its
+particle, sub-sprite and corner from ``gl_VertexID`` (eqs. 3.7–3.9). (Not instanced: llvmpipe runs its vertex pipeline once per instance,
 a fixed cost that made up most of the vertex work.) Blending is additive (ONE, ONE), depth-tested against the scene
 with no depth writes, so no sorting is needed.
 
