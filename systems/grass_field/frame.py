@@ -10,12 +10,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from components.grass_field import GrassFieldConfig
+from systems.grass_field import kernels
 from systems.grass_field.culling import cull_cells, frustum_planes, visible_plants
-from systems.grass_field.lod import (N_BAND_SIDES, CameraInput, ImpostorOrientation, band_distance,
-                                     nearest_views, select_levels, visible_band_sides, wrap_angle)
+from systems.grass_field.lod import (_BAND_NORMALS, N_BAND_SIDES, CameraInput, ImpostorOrientation,
+                                     _horizontal_half_angle, band_distance, nearest_views, select_levels,
+                                     visible_band_sides, wrap_angle)
 from systems.grass_field.simulate import FieldData
 
-__all__ = ["FramePlan", "plan_frame", "band_sector_content"]
+__all__ = ["FramePlan", "plan_frame", "cell_levels", "band_sector_content"]
 
 NEAR_SORTED_LEVELS = 3
 
@@ -35,6 +37,7 @@ class FramePlan:
     band_cell: int | None  # the cell whose band images are shown (None: no band this frame)
     band_sides: np.ndarray = field(default_factory=lambda: np.zeros(N_BAND_SIDES, dtype=bool))
     primitives: dict[int, int] = field(default_factory=dict)  # per level, real primitives
+    plant_list: np.ndarray | None = None  # int32: ``plants`` one after the other (what the renderer uploads)
 
     @property
     def total_primitives(self) -> int:
@@ -88,18 +91,23 @@ def _plants_to_draw(data: FieldData, cells: list[np.ndarray], camera: CameraInpu
 
 
 def plan_frame(cfg: GrassFieldConfig, data: FieldData, camera: CameraInput, orientation: ImpostorOrientation,
-               *, max_level: int | None = None, band_content=None) -> FramePlan:
+               *, max_level: int | None = None, band_content=None, compiled: bool = True) -> FramePlan:
     """Cull cells, pick their levels (eq. 1, table 2, level 5 past the band) and update level-4 rectangles.
 
     ``band_content(cell) -> (12,) bool`` may supply cached per-side content flags (see
     :func:`band_sector_content`); ``max_level`` overrides ``cfg.max_level`` (commands change it at run time).
     Orthographic views (a top-view minimap) use geometry only: the 12 cached views are side views.
+    Perspective views are planned by the compiled kernels of :mod:`~systems.grass_field.kernels` (the same
+    results); ``compiled=False`` plans with the numpy functions they are tested against.
     """
     placed = data.placed
     max_level = cfg.max_level if max_level is None else int(max_level)
     if camera.ortho_pixels_per_unit is not None:
         max_level = 3  # cached side views and the band are meaningless seen from above (a minimap)
     viewer = int(placed.cell_of(camera.position[[0, 2]]))
+    fwd = camera.forward[[0, 2]]
+    if compiled and camera.ortho_pixels_per_unit is None and fwd @ fwd >= 1e-12:
+        return _plan_compiled(cfg, data, camera, orientation, max_level, band_content, viewer)
     keep = cull_cells(placed.cell_centre, camera, cell_radius=data.cell_radius,
                       near_distance=cfg.near_cull_cells * cfg.cell_size, viewer_cell=viewer)
     levels = select_levels(data.lod_points, camera, length=cfg.length_of_interest,
@@ -131,14 +139,78 @@ def plan_frame(cfg: GrassFieldConfig, data: FieldData, camera: CameraInput, orie
         blend = np.zeros(len(impostors))
     prims[4] = 2 * len(impostors)
 
-    band_cell = None
-    sides = np.zeros(N_BAND_SIDES, dtype=bool)
-    if max_level >= 5 and np.any(levels == 5):
-        band_cell = viewer
-        content = band_content(viewer) if band_content is not None else band_sector_content(
-            data, viewer, cfg.merge_distance)
-        sides = visible_band_sides(camera, placed.cell_centre[viewer, [0, 2]], cfg.merge_distance) & content
+    band_cell, sides = _band(cfg, data, camera, levels, max_level, band_content, viewer)
     prims[5] = 2 * int(sides.sum())
     return FramePlan(levels, cells, plants, impostors, orientation.face[impostors].copy(), views.astype(np.int64),
                      blend, viewer, band_cell, sides, prims)
+
+
+def _band(cfg: GrassFieldConfig, data: FieldData, camera: CameraInput, levels: np.ndarray, max_level: int,
+          band_content, viewer: int) -> tuple[int | None, np.ndarray]:
+    """The cell whose band is shown (None: no band) and its sides to draw (visible, with far cells behind)."""
+    if max_level < 5 or not np.any(levels == 5):
+        return None, np.zeros(N_BAND_SIDES, dtype=bool)
+    content = band_content(viewer) if band_content is not None else band_sector_content(
+        data, viewer, cfg.merge_distance)
+    centre = data.placed.cell_centre[viewer, [0, 2]]
+    return viewer, visible_band_sides(camera, centre, cfg.merge_distance) & content
+
+
+def cell_levels(cfg: GrassFieldConfig, data: FieldData, camera: CameraInput, max_level: int,
+                viewer: int) -> np.ndarray:
+    """(C,) level of every cell of a perspective view, -1 where culled: culling (section 3), eq. 1 with table 2
+    and level 5 past the band, compiled (:func:`~systems.grass_field.kernels.cell_levels`; the same levels as
+    :func:`~systems.grass_field.culling.cull_cells` + :func:`~systems.grass_field.lod.select_levels`)."""
+    return kernels.cell_levels(
+        data.placed.cell_centre, data.lod_points, camera.position, camera.forward[[0, 2]],
+        _horizontal_half_angle(camera), float(data.cell_radius), float(cfg.near_cull_cells * cfg.cell_size),
+        viewer, (float(camera.width) * cfg.length_of_interest, camera.tan_half_fov),
+        np.asarray(cfg.level_thresholds, dtype=np.float64), min(max_level, 4), _BAND_NORMALS,
+        float(cfg.merge_distance), max_level >= 5)
+
+
+def _plan_compiled(cfg: GrassFieldConfig, data: FieldData, camera: CameraInput, orientation: ImpostorOrientation,
+                   max_level: int, band_content, viewer: int) -> FramePlan:
+    """:func:`plan_frame` of a perspective view with the compiled kernels (three calls instead of ~150 numpy
+    calls on arrays of a few hundred elements)."""
+    placed = data.placed
+    eye = camera.position
+    levels = cell_levels(cfg, data, camera, max_level, viewer)
+    ordered, cell_counts, plant_list, counts, level_prims = kernels.plants_to_draw(
+        levels, placed.cell_centre, eye, placed.plants_per_cell, placed.plant_position, data.cell_sphere[0],
+        data.cell_sphere[1], data.plant_sphere[0], float(data.plant_sphere[1]), frustum_planes(camera), True,
+        NEAR_SORTED_LEVELS, placed.plant_variant, _real_primitives(data))
+    ends = np.cumsum(counts)
+    plants = [plant_list[ends[k] - counts[k]:ends[k]] for k in range(4)]
+    cell_ends = np.cumsum(cell_counts)
+    cells = [ordered[cell_ends[k] - cell_counts[k]:cell_ends[k]] for k in range(4)]
+    prims = {k: int(level_prims[k]) for k in range(4)}
+
+    impostors, face, view, turns, swaps = kernels.orient_impostors(
+        levels, placed.cell_centre, eye, orientation.face, orientation.image, np.radians(cfg.face_turn_deg),
+        np.radians(cfg.image_switch_deg), data.cell_turn)
+    orientation.turns += turns
+    orientation.swaps += swaps
+    if cfg.blend_views:
+        rel = placed.cell_centre[impostors][:, [0, 2]] - eye[[0, 2]]
+        a, b, blend = nearest_views(np.arctan2(-rel[:, 1], -rel[:, 0]))
+        turn = data.cell_turn[impostors]
+        views = np.stack([np.mod(a - 3 * turn, 12), np.mod(b - 3 * turn, 12)], axis=1)
+    else:
+        views = np.stack([view, view], axis=1)
+        blend = np.zeros(len(impostors))
+    prims[4] = 2 * len(impostors)
+    band_cell, sides = _band(cfg, data, camera, levels, max_level, band_content, viewer)
+    prims[5] = 2 * int(sides.sum())
+    return FramePlan(levels, cells, plants, impostors, face, views, blend, viewer, band_cell, sides, prims,
+                     plant_list=plant_list)
+
+
+def _real_primitives(data: FieldData) -> np.ndarray:
+    """(4, V) real primitives of each geometric level's plant variants (cached on the field's data)."""
+    found = getattr(data, "_real_primitives", None)
+    if found is None:
+        found = np.stack([m.real_primitives for m in data.meshes]).astype(np.int64)
+        data._real_primitives = found
+    return found
 

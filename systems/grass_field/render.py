@@ -534,7 +534,7 @@ class FieldGpu:
         counts = [len(p) for p in plan.plants]
         total = sum(counts)
         if total:
-            self._list_upload[:total] = np.concatenate(plan.plants)
+            self._list_upload[:total] = plan.plant_list if plan.plant_list is not None else np.concatenate(plan.plants)
             width = self.list_tex.width
             rows = -(-total // width)
             self.list_tex.write(self._list_upload[:rows * width].tobytes(), viewport=(0, 0, width, rows))

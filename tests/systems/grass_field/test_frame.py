@@ -72,3 +72,40 @@ def test_level4_rectangles_follow_the_rules_over_a_walk():
         assert plan.impostor_views.min() >= 0 and plan.impostor_views.max() < 12
         previous = plan
     assert previous is not None and len(previous.impostor_cells) > 10
+
+
+def _assert_same_plans(a, b) -> None:
+    assert np.array_equal(a.levels, b.levels) and a.viewer_cell == b.viewer_cell
+    for x, y in zip(a.cells, b.cells, strict=True):
+        assert np.array_equal(x, y)
+    for x, y in zip(a.plants, b.plants, strict=True):
+        assert np.array_equal(x, y)
+    assert np.array_equal(a.impostor_cells, b.impostor_cells)
+    assert np.array_equal(a.impostor_face, b.impostor_face) and np.array_equal(a.impostor_views, b.impostor_views)
+    assert np.array_equal(a.impostor_blend, b.impostor_blend)
+    assert a.band_cell == b.band_cell and np.array_equal(a.band_sides, b.band_sides)
+    assert a.primitives == b.primitives
+
+
+@pytest.mark.parametrize("max_level, blend", [(3, False), (4, False), (5, False), (5, True)])
+def test_compiled_plan_equals_the_numpy_plan(max_level, blend):
+    """The kernels (systems/grass_field/kernels.py) against the numpy functions they replace, over a walk that
+    turns and swaps level-4 rectangles, looks up and down, and crosses the field's edge."""
+    cfg = paper_config(grid_x=24, grid_z=20, plants_per_cell=12, blend_views=blend)
+    _, data = make_field(cfg, height=lambda x, z: 3.0 * np.sin(0.01 * x) * np.cos(0.013 * z))
+    compiled, reference = (ImpostorOrientation(data.cell_count) for _ in range(2))
+    rng = np.random.default_rng(3)
+    for step in range(60):
+        pos = (-900.0 + 40.0 * step, 25.0 + 15.0 * np.sin(step), 200.0 * np.sin(0.1 * step))
+        cam = level_camera(pos, 7.0 * step + rng.uniform(-20.0, 20.0), pitch_deg=rng.uniform(-30.0, 20.0),
+                           fov_x_deg=rng.uniform(40.0, 90.0))
+        b = plan_frame(cfg, data, cam, reference, max_level=max_level, compiled=False)
+        a = plan_frame(cfg, data, cam, compiled, max_level=max_level)
+        assert a.plant_list is not None and b.plant_list is None
+        assert np.array_equal(a.plant_list, np.concatenate(b.plants))
+        _assert_same_plans(a, b)
+        assert np.array_equal(compiled.face, reference.face, equal_nan=True)
+        assert np.array_equal(compiled.image, reference.image, equal_nan=True)
+    assert (compiled.turns, compiled.swaps) == (reference.turns, reference.swaps)
+    if max_level >= 4:
+        assert compiled.turns > 0 and compiled.swaps > 0
