@@ -15,6 +15,7 @@ __all__ = [
     "extract_isosurface",
     "noise_factor",
     "splat_blobs",
+    "splat_blobs_numpy",
     "toon_coordinate",
 ]
 
@@ -37,6 +38,21 @@ def blob_axes(density_at_particle: NDArray[np.float64], speed: NDArray[np.float6
 
 def splat_blobs(target: F32, centres: NDArray[np.float64], directions: NDArray[np.float64],
                 along: NDArray[np.float64], across: NDArray[np.float64], amplitude: float) -> int:
+    """Add one ellipsoidal density blob per particle to ``target`` (in place): figure 2, seeds/002, as one compiled
+    loop (:func:`systems.toon_smoke.kernels.splat_blobs_kernel`); :func:`splat_blobs_numpy` is the same sum in
+    numpy (the kernel's reference in the tests).  Returns the number of blobs added."""
+    if len(centres) == 0 or amplitude == 0.0:
+        return 0
+    from systems.toon_smoke.kernels import splat_blobs_kernel
+
+    f64 = np.float64
+    return int(splat_blobs_kernel(target, np.ascontiguousarray(centres, f64), np.ascontiguousarray(directions, f64),
+                                  np.ascontiguousarray(along, f64), np.ascontiguousarray(across, f64),
+                                  float(amplitude)))
+
+
+def splat_blobs_numpy(target: F32, centres: NDArray[np.float64], directions: NDArray[np.float64],
+                      along: NDArray[np.float64], across: NDArray[np.float64], amplitude: float) -> int:
     """Add one ellipsoidal density blob per particle to ``target`` (in place), without a Python loop per particle.
 
     ``centres`` are in the target's index space (cell i's centre at i), ``directions`` unit stretch axes, ``along``

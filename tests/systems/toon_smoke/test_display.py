@@ -5,7 +5,7 @@ import pytest
 
 from engine.noise import PerlinNoise
 from systems.toon_smoke import simulate
-from systems.toon_smoke.display import blob_axes, extract_isosurface, splat_blobs, toon_coordinate
+from systems.toon_smoke.display import blob_axes, extract_isosurface, splat_blobs, splat_blobs_numpy, toon_coordinate
 from systems.toon_smoke.grid import Geometry, upsample_linear
 from tests.systems.toon_smoke.helpers import run_state, small
 
@@ -70,6 +70,30 @@ def test_splat_matches_a_per_particle_reference():
         q = 1.0 - (t * t / a ** 2 + ((r * r).sum(-1) - t * t) / b ** 2)
         ref += 0.7 * np.where(q > 0, q, 0.0) ** 3
     assert np.allclose(grid, ref, atol=1e-4)
+
+
+def _random_blobs(seed: int, m: int, reach: float):
+    rng = np.random.default_rng(seed)
+    centres = rng.uniform(-2.0, 34.0, (m, 3))  # some more than a cell outside the grid: skipped by both
+    dirs = rng.standard_normal((m, 3))
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    along = rng.uniform(0.3, reach, m)
+    return centres, dirs, along, along / rng.uniform(1.0, 2.0, m)
+
+
+@pytest.mark.parametrize("seed, m, shape", [(3, 300, (32, 32, 32)), (4, 40, (20, 24, 28)), (6, 2, (36, 36, 36))])
+def test_compiled_splat_equals_the_numpy_splat(seed, m, shape):
+    """The kernel sums the same float32 terms in the same order as the numpy code; only the stencil products
+    (a BLAS matrix product there, left-to-right sums here) may round differently: a few float32 ulps."""
+    blobs = _random_blobs(seed, m, 3.5)
+    base = np.random.default_rng(seed).uniform(0.0, 1.0, shape).astype(np.float32)
+    compiled, reference = base.copy(), base.copy()
+    assert splat_blobs(compiled, *blobs, 0.9) == splat_blobs_numpy(reference, *blobs, 0.9)
+    assert not np.array_equal(compiled, base)  # blobs were added
+    assert np.allclose(compiled, reference, rtol=0.0, atol=1e-5)
+    again = base.copy()
+    splat_blobs(again, *blobs, 0.9)
+    assert np.array_equal(again, compiled)  # the same bits every time
 
 
 def test_particles_add_blobs_only_above_the_threshold():
