@@ -5,19 +5,24 @@ around every real particle are drawn as opaque points with the scene's depth tes
 ensemble image (a pixel is covered or not, whatever number of pseudo-particles land on it), and the R images are
 averaged: colour = colour_sand * n / R + scene * (1 - n / R), n the number of repeats covering the pixel.
 
-Two implementations of the same ensemble (same hashed pseudo-particles, same coverage counts n):
+The pseudo-particles' offsets come from a table of points uniform in the unit ball, drawn once from the engine's
+seeded random streams (:func:`ball_offsets`) and bound as a uniform block; particle i's samples this frame are
+consecutive table entries from a hashed start (shaders/pbvr_sample.glsl; :func:`sample_indices` in numpy).
+
+Two implementations of the same ensemble (same pseudo-particles, same coverage counts n):
 
 * **scatter** (GL 4.3 compute shaders, else GL 4.2 image load/store in the vertex stage; the first the context
   compiles, probed once and logged):
-  ``pbvr_clear`` zeroes a coverage image of one 32-bit word per pixel (two for R > 32);
+  a persistent coverage image of one 32-bit word per pixel (two for R > 32), all zero between frames;
   ``pbvr_accumulate`` has each pseudo-particle test the pixels of its point against the view's depth and OR bit r
   into their words: one compute invocation per real particle, which projects it once and draws its R x K
   pseudo-particles (shaders/pbvr_scatter.comp), or one draw of N x (R x K) vertices with rasterisation off
   (shaders/pbvr_scatter.vert);
   ``pbvr_resolve`` counts the bits and composites over the view, inside the screen rectangle the particle cloud
-  can reach.  A software rasteriser spends most of a point's cost on setting up and shading its pixel block;
-  here a pseudo-particle costs a few dozen shader instructions, and a compute dispatch runs on all of the
-  driver's worker threads (llvmpipe runs the vertex stage on the calling thread alone).
+  can reach, and zeroes the words it read (so it writes the coverage image too; no clear pass).  A software
+  rasteriser spends most of a point's cost on setting up and shading its pixel block; here a pseudo-particle
+  costs a few dozen shader instructions, and a compute dispatch runs on all of the driver's worker threads
+  (llvmpipe runs the vertex stage on the calling thread alone).
 * **slab** (GL 3.3): ``pbvr_clear`` clears an rgba16f accumulation target and a depth buffer;
   ``pbvr_accumulate`` draws the R repeats as points, repeat r at the depth of its own slab, additively blended
   (rgb += colour, a += 1) with the depth test GL_LESS, which counts a pixel once per repeat;
@@ -44,6 +49,7 @@ from engine.render.feature import OPAQUE, TRANSPARENT, RenderFeature, View
 from engine.render.graph import TextureDesc
 from engine.render.passes import SHADERS as ENGINE_SHADERS
 from engine.render.passes import lighting_uniforms, opaque_setup, primitive, set_uniforms
+from engine.rng import stable_key
 from engine.spatial import Transform
 from systems.dust_devil.simulate import marker_points, world_positions
 
@@ -80,9 +86,51 @@ def extract_devils(world) -> list[DevilFrame]:
     return out
 
 
-GL_R32UI = 0x8236  # the coverage words: an r32f graph texture bound as an r32ui image (the same 32 bits)
+GL_R32UI = 0x8236  # the coverage words: 32-bit unsigned integers, one per pixel and word
 MAX_SCATTER_REPEATS = 64  # two coverage words per pixel
 COMPUTE_GROUP = 64  # invocations per work group of pbvr_scatter.comp
+
+
+BALL_OFFSETS = 1024  # entries of the pseudo-particle offset table (pbvr_sample.glsl's BALL_OFFSETS)
+BALL_STREAM = "dust_devil.pbvr_offsets"  # the random stream the table is drawn from
+BALL_BINDING = 0  # uniform block binding point of the table
+
+
+def ball_offsets(seed: int, count: int = BALL_OFFSETS) -> np.ndarray:
+    """The pseudo-particle offset table (count, 4) float32: xyz independent and uniform in the unit ball (2.3),
+    w = 0.  Drawn from the stream ``BALL_STREAM`` of the scene's seed, derived as the engine's streams are
+    (:class:`engine.rng.RandomStreams`) but not registered in the world: rendering leaves the state hash alone.
+
+    A uniform point in the ball: a uniform direction (a normalised Gaussian vector) at radius u^(1/3), u uniform
+    in [0, 1) (the volume inside radius ρ is ρ³)."""
+    seq = np.random.SeedSequence(entropy=int(seed), spawn_key=(stable_key(BALL_STREAM), 0))
+    rng = np.random.Generator(np.random.PCG64(seq))
+    direction = rng.standard_normal((count, 3))
+    radius = np.cbrt(rng.random(count))
+    out = np.zeros((count, 4), np.float32)
+    out[:, :3] = direction * (radius / np.linalg.norm(direction, axis=1))[:, None]
+    return out
+
+
+def pcg_hash(v: np.ndarray | int) -> np.ndarray:
+    """pbvr_sample.glsl's ``pcg_hash`` on uint32 (Jarzynski & Olano 2020, PCG with one word of state)."""
+    with np.errstate(over="ignore"):
+        state = np.asarray(v, np.uint32) * np.uint32(747796405) + np.uint32(2891336453)
+        word = ((state >> ((state >> np.uint32(28)) + np.uint32(4))) ^ state) * np.uint32(277803737)
+        return (word >> np.uint32(22)) ^ word
+
+
+def frame_key(frame_index: int) -> int:
+    """The shaders' ``frame_key`` uniform of a frame: a hash of its index, so every frame draws a new ensemble."""
+    return int(pcg_hash(np.uint32(frame_index % 2**32)))
+
+
+def sample_indices(particles: int, samples: int, key: int) -> np.ndarray:
+    """Table entries (particles, samples) of the pseudo-particles ``r * K + k`` of particles 0..N-1 in the frame
+    with ``frame_key`` ``key`` (pbvr_sample.glsl: consecutive entries from a hashed start per particle)."""
+    with np.errstate(over="ignore"):
+        start = pcg_hash(np.arange(particles, dtype=np.uint32) + np.uint32(key))
+        return (start[:, None] + np.arange(samples, dtype=np.uint32)) & np.uint32(BALL_OFFSETS - 1)
 
 
 def slab_depth(r: int, repeats: int) -> float:
@@ -143,9 +191,20 @@ class DustDevilParticles(RenderFeature):
         self.scatter: bool | None = None  # the coverage-word scatter path; None: probed at the first PBVR frame
         self.compute = False  # the scatter as a compute shader (GL 4.3); else in the vertex stage (GL 4.2)
         self._resolve: dict[str, moderngl.VertexArray] = {}
+        self._seed = 0  # the scene's random seed (the offset table is drawn from it)
+        self._ball: tuple[int, moderngl.Buffer] | None = None  # (seed, uniform buffer of ball_offsets(seed))
+        # (entity, view) -> (size, texture): the persistent coverage words, zero between frames
+        self._coverage: dict[tuple[int, str], tuple[tuple[int, int], moderngl.Texture]] = {}
+        self._unresolved: set[tuple[int, str]] = set()  # coverage scattered into but not resolved (zeroed) yet
 
     def extract(self, world) -> list[DevilFrame]:
-        return extract_devils(world)
+        self._seed = int(world.random.seed)
+        devils = extract_devils(world)
+        entities = {d.entity for d in devils}
+        for key in [k for k in self._coverage if k[0] not in entities]:  # a dust devil gone: free its images
+            self._coverage.pop(key)[1].release()
+            self._unresolved.discard(key)
+        return devils
 
     # -------------------------------------------------------------------------- GL objects
     def _vao(self, devil: DevilFrame, program: str, defines: tuple[str, ...] = ()) -> moderngl.VertexArray:
@@ -185,6 +244,31 @@ class DustDevilParticles(RenderFeature):
                                          (SHADERS / f"{fragment}.frag").read_text())
             vao = self._resolve[fragment] = self.ctx.vertex_array(prog, [])
         return vao
+
+    def _bind_ball(self, program) -> None:
+        """Bind the pseudo-particle offset table (:func:`ball_offsets` of the scene's seed, uploaded once) to
+        ``program``'s ``BallOffsets`` block."""
+        if self._ball is None or self._ball[0] != self._seed:
+            if self._ball is not None:
+                self._ball[1].release()
+            self._ball = (self._seed, self.ctx.buffer(ball_offsets(self._seed).tobytes()))
+        program["BallOffsets"].binding = BALL_BINDING
+        self._ball[1].bind_to_uniform_block(BALL_BINDING)
+
+    def _coverage_image(self, entity: int, view: View, words: int) -> moderngl.Texture:
+        """The persistent coverage words of a dust devil in a view: (width, height x words) r32ui, created zero;
+        the resolve leaves it zero again every frame."""
+        size = (view.width, view.height * words)
+        key = (entity, view.name)
+        held = self._coverage.get(key)
+        if held is not None and held[0] == size:
+            return held[1]
+        if held is not None:
+            held[1].release()
+        texture = self.ctx.texture(size, 1, np.zeros(size[0] * size[1], np.uint32).tobytes(), dtype="u4")
+        self._coverage[key] = (size, texture)
+        self._unresolved.discard(key)
+        return texture
 
     def _compute(self, point_side: int) -> moderngl.ComputeShader:
         """``shaders/pbvr_scatter.comp`` for points of ``point_side`` pixels (compiled once per side by the
@@ -254,22 +338,11 @@ class DustDevilParticles(RenderFeature):
         words = coverage_words(devil.repeats)
         rect = screen_rect(devil.positions, view.view_proj, view.width, view.height, devil.radius,
                            devil.point_size)
-        h: dict[str, Any] = {}
-
-        def clear_setup(b):
-            h["cov"] = b.write(b.create(f"{prefix}.coverage.{view.name}",
-                                        TextureDesc(view.width, view.height * words, "r32f")))
-
-        def clear(pc):
-            if rect is None:
-                return
-            fbo = self.renderer.framebuffer(pc.get(h["cov"]))
-            fbo.use()
-            # +0.0: every bit zero; only where pseudo-particles can land and the resolve reads (one word: the rect)
-            fbo.clear(0.0, 0.0, 0.0, 0.0, viewport=rect if words == 1 else None)
-
-        graph.add_pass(f"{prefix}.pbvr_clear.{view.name}", clear_setup, clear)
-        self.declared_repeats[(devil.entity, view.name)] = devil.repeats
+        key = (devil.entity, view.name)
+        # persistent and zero at the start of every frame (the resolve zeroes what it reads): no clear pass
+        h: dict[str, Any] = {"cov": graph.import_resource(f"{prefix}.coverage.{view.name}",
+                                                          self._coverage_image(devil.entity, view, words))}
+        self.declared_repeats[key] = devil.repeats
 
         def accumulate_setup(b):
             b.read(view.depth)
@@ -280,6 +353,10 @@ class DustDevilParticles(RenderFeature):
                 return
             ctx = self.ctx
             coverage = pc.get(h["cov"])
+            if key in self._unresolved:  # an earlier frame scattered but never resolved (it raised): start empty
+                coverage.write(np.zeros(coverage.width * coverage.height, np.uint32).tobytes())
+            self._unresolved.add(key)
+            ctx.memory_barrier()  # the last resolve's image stores (zeroes) before this pass's loads
             self.renderer.framebuffer(coverage).use()  # not the view's: its depth is sampled here
             scene_depth = pc.get(view.depth)
             compare = scene_depth.compare_func
@@ -288,16 +365,18 @@ class DustDevilParticles(RenderFeature):
             scene_depth.use(0)
             coverage.bind_to_image(0, read=True, write=True, format=GL_R32UI)
             uniforms = dict(view_proj=view.view_proj.T.copy(), sub_particles=devil.sub_particles,
-                            frame_seed=int(self.renderer.frame_index % 2**31), radius=devil.radius,
+                            frame_key=frame_key(self.renderer.frame_index), radius=devil.radius,
                             point_size=devil.point_size, view_size=(view.width, view.height), scene_depth=0)
             if self.compute:
                 n = len(devil.positions)
                 shader = self._compute(math.ceil(devil.point_size))
                 self._particle_buffer(devil).bind_to_storage_buffer(0)
+                self._bind_ball(shader)
                 set_uniforms(shader, particles=n, repeats=devil.repeats, **uniforms)
                 shader.run((n + COMPUTE_GROUP - 1) // COMPUTE_GROUP)
             else:
                 vao = self._vao(devil, "pbvr_scatter", (f"POINT_SIDE {math.ceil(devil.point_size)}",))
+                self._bind_ball(vao.program)
                 set_uniforms(vao.program, **uniforms)
                 ctx.enable(moderngl.RASTERIZER_DISCARD)
                 vao.render(moderngl.POINTS, vertices=len(devil.positions),
@@ -310,7 +389,7 @@ class DustDevilParticles(RenderFeature):
         graph.add_pass(f"{prefix}.pbvr_accumulate.{view.name}", accumulate_setup, accumulate)
 
         def resolve_setup(b):
-            b.read(h["cov"])
+            h["cov"] = b.write(h["cov"])  # reads the words and zeroes them (image loads and stores)
             view.color = b.write(view.color)
 
         def resolve(pc):
@@ -323,13 +402,14 @@ class DustDevilParticles(RenderFeature):
             ctx.disable(moderngl.DEPTH_TEST)
             ctx.enable(moderngl.BLEND)
             ctx.blend_func = moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA
-            pc.get(h["cov"]).bind_to_image(0, read=True, write=False, format=GL_R32UI)
+            pc.get(h["cov"]).bind_to_image(0, read=True, write=True, format=GL_R32UI)
             vao = self._resolve_vao("pbvr_coverage")
             set_uniforms(vao.program, view_height=view.height, words=words, color=devil.color,
                          inv_repeats=1.0 / devil.repeats)
             vao.render(moderngl.TRIANGLES, vertices=3)
             ctx.disable(moderngl.BLEND)
             fbo.scissor = None
+            self._unresolved.discard(key)
 
         graph.add_pass(f"{prefix}.pbvr_resolve.{view.name}", resolve_setup, resolve)
 
@@ -392,9 +472,11 @@ class DustDevilParticles(RenderFeature):
             scene_depth.compare_func = ""  # read raw depth values
             scene_depth.use(0)
             vao = self._vao(devil, "pbvr")
+            self._bind_ball(vao.program)
+            key = frame_key(self.renderer.frame_index)
             for r in range(devil.repeats):
                 set_uniforms(vao.program, view_proj=view.view_proj.T.copy(), sub_particles=devil.sub_particles,
-                             repeat_index=r, frame_seed=int(self.renderer.frame_index % 2**31), radius=devil.radius,
+                             repeat_index=r, frame_key=key, radius=devil.radius,
                              slab_depth=slab_depth(r, devil.repeats), point_size=devil.point_size,
                              color=devil.color, scene_depth=0)
                 vao.render(moderngl.POINTS, vertices=len(devil.positions), instances=devil.sub_particles)
@@ -413,6 +495,13 @@ class DustDevilParticles(RenderFeature):
         for vao in self._resolve.values():
             vao.release()
         self._resolve.clear()
+        for _, texture in self._coverage.values():
+            texture.release()
+        self._coverage.clear()
+        self._unresolved.clear()
+        if self._ball is not None:
+            self._ball[1].release()
+            self._ball = None
 
 
 class DustDevilMarkers(RenderFeature):

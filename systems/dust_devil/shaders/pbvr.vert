@@ -7,7 +7,7 @@
 uniform mat4 view_proj;
 uniform int sub_particles;   // K
 uniform int repeat_index;    // r in [0, R)
-uniform int frame_seed;      // changes every frame: a new ensemble
+uniform uint frame_key;      // changes every frame: a new ensemble (pbvr_sample.glsl)
 uniform float radius;        // metres: pseudo-particles are uniform in a ball of this radius
 uniform float slab_depth;    // NDC depth of this repeat's slab
 uniform float point_size;    // pixels
@@ -18,7 +18,8 @@ flat out float v_depth;      // window-space depth of the pseudo-particle
 
 void main() {
     int sample_id = repeat_index * sub_particles + gl_InstanceID;
-    vec4 clip = view_proj * vec4(in_position + sub_particle_offset(gl_VertexID, sample_id, frame_seed, radius), 1.0);
+    vec3 offset = radius * ball_offset(particle_key(gl_VertexID, frame_key), sample_id);
+    vec4 clip = view_proj * vec4(in_position + offset, 1.0);
     float ndc_z = clip.z / clip.w;
     v_depth = 0.5 * ndc_z + 0.5;
     if (clip.w <= 0.0 || ndc_z < -1.0 || ndc_z > 1.0) {

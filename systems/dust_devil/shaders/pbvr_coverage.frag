@@ -2,7 +2,10 @@
 // PBVR resolve for the scatter path: n = the number of repeats whose opaque ensemble image covers the pixel (set
 // bits of its coverage words).  Blended with (ONE, ONE_MINUS_SRC_ALPHA) over the view:
 // colour = colour_sand * n / R + scene * (1 - n / R), the mean of the R ensemble images over the scene.
-layout(r32ui, binding = 0) uniform readonly uimage2D coverage;
+// The coverage image persists between frames: the resolve zeroes the words it read, so the next frame's scatter
+// starts from an empty image without a clear pass (every word the scatter sets lies in the rectangle the resolve
+// covers, and a pixel with n = 0 has no bit to clear).
+layout(r32ui, binding = 0) uniform uimage2D coverage;
 uniform int view_height;
 uniform int words;           // coverage words per pixel: 1 for R <= 32, else 2
 uniform vec3 color;
@@ -11,8 +14,16 @@ out vec4 frag;
 void main() {
     ivec2 p = ivec2(gl_FragCoord.xy);
     int n = bitCount(imageLoad(coverage, p).r);
-    if (words > 1) n += bitCount(imageLoad(coverage, p + ivec2(0, view_height)).r);
+    if (words > 1) {
+        ivec2 q = p + ivec2(0, view_height);
+        uint high = imageLoad(coverage, q).r;
+        if (high != 0u) {
+            imageStore(coverage, q, uvec4(0u));
+            n += bitCount(high);
+        }
+    }
     if (n == 0) discard;
+    imageStore(coverage, p, uvec4(0u));
     float a = float(n) * inv_repeats;
     frag = vec4(color * a, a);
 }

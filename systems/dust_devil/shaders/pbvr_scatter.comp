@@ -3,7 +3,7 @@
 // same coverage words as pbvr_scatter.vert, but a dispatch is spread over the driver's worker threads, where a
 // software rasteriser runs the vertex stage on the calling thread alone.
 // One invocation = one real particle: it projects the particle once, then draws its R x K pseudo-particles
-// (sample r * K + k, offset d uniform in the ball: clip = view_proj (p, 1) + view_proj (d, 0)) and, for each, tests
+// (sample r * K + k, offset d from the ball table: clip = view_proj (p, 1) + view_proj (d, 0)) and, for each, tests
 // every pixel of its opaque square point of `point_size` pixels against the scene's depth and sets bit r of that
 // pixel's coverage word.  A pixel counts each repeat at most once, however many of the repeat's pseudo-particles
 // land on it: the R ensemble images, each opaque, kept as R bits per pixel.
@@ -18,7 +18,7 @@ uniform mat4 view_proj;
 uniform int particles;       // N
 uniform int sub_particles;   // K
 uniform int repeats;         // R
-uniform int frame_seed;      // changes every frame: a new ensemble
+uniform uint frame_key;      // changes every frame: a new ensemble (pbvr_sample.glsl)
 uniform float radius;        // metres: pseudo-particles are uniform in a ball of this radius
 uniform float point_size;    // pixels
 uniform ivec2 view_size;     // pixels; repeats 32..63 use the rows view_size.y.. of the coverage image
@@ -33,12 +33,12 @@ void main() {
     if (particle >= particles) return;
     vec4 centre = view_proj * vec4(particle_xyz[3 * particle], particle_xyz[3 * particle + 1],
                                    particle_xyz[3 * particle + 2], 1.0);
+    uint key = particle_key(particle, frame_key);
     for (int r = 0; r < repeats; ++r) {
         uint bit = 1u << uint(r & 31);
         int row = (r >> 5) * view_size.y;
         for (int k = 0; k < sub_particles; ++k) {
-            vec4 clip = centre + view_proj * vec4(sub_particle_offset(particle, r * sub_particles + k, frame_seed,
-                                                                      radius), 0.0);
+            vec4 clip = centre + view_proj * vec4(radius * ball_offset(key, r * sub_particles + k), 0.0);
             float ndc_z = clip.z / clip.w;
             if (clip.w <= 0.0 || ndc_z < -1.0 || ndc_z > 1.0) continue;  // outside the near/far range: clipped
             float depth = 0.5 * ndc_z + 0.5;

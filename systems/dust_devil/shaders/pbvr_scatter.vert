@@ -7,7 +7,7 @@
 // pseudo-particles land on it: the R ensemble images, each opaque, kept as R bits per pixel.
 uniform mat4 view_proj;
 uniform int sub_particles;   // K
-uniform int frame_seed;      // changes every frame: a new ensemble
+uniform uint frame_key;      // changes every frame: a new ensemble (pbvr_sample.glsl)
 uniform float radius;        // metres: pseudo-particles are uniform in a ball of this radius
 uniform float point_size;    // pixels
 uniform ivec2 view_size;     // pixels; repeats 32..63 use the rows view_size.y.. of the coverage image
@@ -23,7 +23,8 @@ in vec3 in_position;         // the real particle, world space
 void main() {
     gl_Position = vec4(0.0, 0.0, 0.0, 1.0);  // never rasterised
     int sample_id = gl_InstanceID;
-    vec4 clip = view_proj * vec4(in_position + sub_particle_offset(gl_VertexID, sample_id, frame_seed, radius), 1.0);
+    vec3 offset = radius * ball_offset(particle_key(gl_VertexID, frame_key), sample_id);
+    vec4 clip = view_proj * vec4(in_position + offset, 1.0);
     float ndc_z = clip.z / clip.w;
     if (clip.w <= 0.0 || ndc_z < -1.0 || ndc_z > 1.0) return;  // outside the near/far range: clipped away
     float depth = 0.5 * ndc_z + 0.5;
