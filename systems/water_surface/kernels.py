@@ -200,34 +200,70 @@ def plane_levels(z, solid, centre, half):
 
 
 @kernel
+def extents(shapes, half, radius, rotation):
+    """(B, 3) half size of each body's axis-aligned bounding box (``Bodies.extent``): Σ_j |R_ij|·half_j for a box
+    (summed in order j = 0, 1, 2: numpy's einsum may round the last bit differently; the extent only decides
+    which bodies and vertices a step looks at), the radius for a sphere."""
+    nb = len(shapes)
+    out = np.empty((nb, 3))
+    for b in range(nb):
+        for i in range(3):
+            if shapes[b] == 0:
+                out[b, i] = (abs(rotation[b, i, 0]) * half[b, 0] + abs(rotation[b, i, 1]) * half[b, 1]) \
+                    + abs(rotation[b, i, 2]) * half[b, 2]
+            else:
+                out[b, i] = radius[b]
+    return out
+
+
+@kernel
 def near_bodies(extent, position, x0, z0, h, nx, nz, y0, depth, heights):
     """``surface._near``: bodies whose footprint overlaps the grid and whose vertical extent reaches the water
-    (from two half heights above the highest wave)."""
+    (from two half heights above the highest wave; the first height settles most bodies, the maximum is found
+    only when one is not settled by it)."""
     nb = len(extent)
     near = np.zeros(nb, np.bool_)
+    candidate = np.zeros(nb, np.bool_)
     first = heights.ravel()[0] + y0
-    highest = np.nan
+    unsettled = False
     for b in range(nb):
         cu = (position[b, 0] - x0) / h
         cv = (position[b, 2] - z0) / h
         hu, hv = extent[b, 0] / h, extent[b, 2] / h
         over = (cu + hu >= 0.0) and (cu - hu <= nx - 1) and (cv + hv >= 0.0) and (cv - hv <= nz - 1)
-        vertical, y = extent[b, 1], position[b, 1]
-        if not (over and y + vertical >= y0 - depth):
-            continue
-        low = y - 2.0 * vertical
-        near[b] = low <= first + 1e-9
-    for b in range(nb):  # only when a body is not settled by the first height: the maximum height
-        cu = (position[b, 0] - x0) / h
-        cv = (position[b, 2] - z0) / h
-        hu, hv = extent[b, 0] / h, extent[b, 2] / h
-        over = (cu + hu >= 0.0) and (cu - hu <= nx - 1) and (cv + hv >= 0.0) and (cv - hv <= nz - 1)
-        if near[b] or not (over and position[b, 1] + extent[b, 1] >= y0 - depth):
-            continue
-        if highest != highest:
-            highest = heights.max() + y0
-        near[b] = position[b, 1] - 2.0 * extent[b, 1] <= highest + 1e-9
+        candidate[b] = over and position[b, 1] + extent[b, 1] >= y0 - depth
+        near[b] = candidate[b] and position[b, 1] - 2.0 * extent[b, 1] <= first + 1e-9
+        unsettled |= candidate[b] and not near[b]
+    if unsettled:
+        highest = heights.max() + y0
+        for b in range(nb):
+            near[b] = candidate[b] and position[b, 1] - 2.0 * extent[b, 1] <= highest + 1e-9
     return near
+
+
+@kernel
+def bodies_in_water(z, solid, solid_flat, need_volume, shapes, half, radius, position, rotation, x0, z0, h, y0,
+                    depth):
+    """The start of a step (``surface.step_water``): the water's mean level (the volume to keep) when
+    ``need_volume``, the bodies near the water (:func:`near_bodies`) and their plane levels S'_z − y0
+    (:func:`plane_levels`). Returns (volume, near, number near, levels of the near bodies, fallback)."""
+    nz, nx = z.shape
+    volume = water_mean(z, solid_flat) if need_volume else 0.0
+    extent = extents(shapes, half, radius, rotation)
+    near = near_bodies(extent, position, x0, z0, h, nx, nz, y0, depth, z)
+    count = 0
+    for b in range(len(near)):
+        count += 1 if near[b] else 0
+    centre = np.empty((count, 2))
+    size = np.empty((count, 2))
+    r = 0
+    for b in range(len(near)):
+        if near[b]:
+            centre[r, 0], centre[r, 1] = (position[b, 0] - x0) / h, (position[b, 2] - z0) / h
+            size[r, 0], size[r, 1] = extent[b, 0] / h, extent[b, 2] / h
+            r += 1
+    levels, fallback = plane_levels(z, solid, centre, size)
+    return volume, near, count, levels, fallback
 
 
 # ------------------------------------------------------------------------------------- cross-sections D'
@@ -560,9 +596,14 @@ def edge_table(polygons, counts):
 
 @kernel(inline="always")
 def _inside(table, b, u, v, margin):
-    """``outline._inside``: (u, v) inside polygon b by more than ``margin``."""
+    """``outline._inside``: (u, v) inside polygon b by more than ``margin``. A polygon with fewer than 3 vertices
+    (c = +∞) contains nothing; padding edges (after the real ones) contain everything, so the loop stops there."""
+    if table[b, 0, 6] == np.inf:
+        return False
     for k in range(table.shape[1]):
         row = table[b, k]
+        if row[8] != 0.0:
+            break
         if not ((row[4] * u + row[5] * v) - row[6] > margin):
             return False
     return True
@@ -570,18 +611,20 @@ def _inside(table, b, u, v, margin):
 
 @kernel(inline="always")
 def _nearest(table, b, u, v):
-    """``outline._nearest``: the point of polygon b's outline nearest to (u, v) (the first of equal distances)."""
+    """``outline._nearest``: the point of polygon b's outline nearest to (u, v) (the first of equal distances;
+    padding edges, at distance ∞, only when the polygon has no edge)."""
     best, bu, bv = np.inf, 0.0, 0.0
-    first = True
     for k in range(table.shape[1]):
         row = table[b, k]
+        if k > 0 and row[8] != 0.0:
+            break
         ax, ay, ex, ey = row[0], row[1], row[2], row[3]
         t = min(max(((u - ax) * ex + (v - ay) * ey) / row[7], 0.0), 1.0)
         fx, fy = ax + t * ex, ay + t * ey
         dx, dy = fx - u, fy - v
         dist2 = dx * dx + dy * dy + row[8]
-        if first or dist2 < best:
-            best, bu, bv, first = dist2, fx, fy, False
+        if k == 0 or dist2 < best:
+            best, bu, bv = dist2, fx, fy
     return bu, bv
 
 
@@ -729,28 +772,52 @@ def point_pairs(uv, nx, nz):
         return a[:n], b[:n], w[:n]
     stride = nx + 3
     cell = np.empty(m, np.int64)
+    key = np.empty(m, np.int64)
     for i in range(m):
         cell[i] = (np.int64(math.floor(uv[i, 1])) + 1) * stride + np.int64(math.floor(uv[i, 0])) + 1
-    order = np.argsort(cell, kind="mergesort")
-    sorted_cell = cell[order]
-    offsets = np.array([0, 1, stride - 1, stride, stride + 1], np.int64)
+        key[i] = cell[i] * m + i  # unique: sorting it is numpy's stable sort of the squares
+    key.sort()
+    order = np.empty(m, np.int64)
+    sorted_cell = np.empty(m, np.int64)
+    for r in range(m):
+        sorted_cell[r], order[r] = key[r] // m, key[r] % m
+    rank = np.empty(m, np.int64)
+    for r in range(m):
+        rank[order[r]] = r
     cap = 16 * m
     a = np.empty(cap, np.int64)
     b = np.empty(cap, np.int64)
     w = np.empty(cap)
     n = 0
     for i in range(m):
-        for around in range(5):
-            want = cell[i] + offsets[around]
-            lo = np.searchsorted(sorted_cell, want)
-            hi = lo
-            while hi < m and sorted_cell[hi] == want:
-                hi += 1
-            for pos in range(lo, hi):
+        # the squares in numpy's order: own (0), right (1), then the next row's left, middle, right (2, 3, 4) are
+        # two runs of ascending squares in the sorted points: [own, own + 1] and [own + stride − 1, own + stride + 1]
+        for run in range(2):
+            first = cell[i] + (0 if run == 0 else stride - 1)
+            last = first + (1 if run == 0 else 2)
+            if run == 0:
+                pos = rank[i]
+                while pos > 0 and sorted_cell[pos - 1] == first:
+                    pos -= 1
+            else:
+                lo, hi = 0, m
+                while lo < hi:
+                    mid = (lo + hi) >> 1
+                    if sorted_cell[mid] < first:
+                        lo = mid + 1
+                    else:
+                        hi = mid
+                pos = lo
+            while pos < m and sorted_cell[pos] <= last:
                 j = order[pos]
+                own = sorted_cell[pos] == cell[i]
+                pos += 1
                 du, dv = uv[i, 0] - uv[j, 0], uv[i, 1] - uv[j, 1]
-                dd = math.sqrt(du * du + dv * dv)
-                if dd < 1.0 and (around > 0 or i < j):
+                dd2 = du * du + dv * dv
+                if dd2 >= 1.0 or (own and i >= j):  # sqrt(x) < 1 needs x < 1
+                    continue
+                dd = math.sqrt(dd2)
+                if dd < 1.0:
                     if n == cap:
                         cap *= 2
                         a, b, w = _grow_int(a, cap), _grow_int(b, cap), _grow(w, cap)
@@ -767,43 +834,63 @@ def point_pairs(uv, nx, nz):
 
 # ---------------------------------------------------------------------------------------------- propagation
 @kernel
-def wave_grid(z, zp, k, coefficient, new):
+def wave_grid(z, zp, k, new):
     """Eq. 2.8 on the whole grid in one pass: new = (2 − n·k)·z − z(t − 1) + k·z_left + k·z_right + k·z_up +
-    k·z_down (``waves.propagate``'s seven passes, the same additions in the same order; neighbours beyond the
-    border are absent: reflecting borders, eq. 2.9 / 2.10). ``new`` may be ``zp``."""
+    k·z_down, n = 4 inside, 3 on an edge, 2 at a corner (``waves.propagate``'s seven passes with its coefficient
+    2 − k·``free_degree``: the same additions in the same order; neighbours beyond the border are absent:
+    reflecting borders, eq. 2.9 / 2.10). ``new`` may be ``zp``."""
     nz, nx = z.shape
     for j in range(nz):
         up, down = j > 0, j < nz - 1
-        for i in range(nx):
-            s = coefficient[j, i] * z[j, i] - zp[j, i]
-            if i > 0:
-                s += z[j, i - 1] * k
-            if i < nx - 1:
-                s += z[j, i + 1] * k
+        _wave_vertex(z, zp, k, new, j, 0, up, down)
+        inner = 2.0 - k * (2.0 + up + down)  # 2 − k·n with n = 2 + 0, 1 or 2 (the coefficient's bits)
+        for i in range(1, nx - 1):
+            s = inner * z[j, i] - zp[j, i]
+            s += z[j, i - 1] * k
+            s += z[j, i + 1] * k
             if up:
                 s += z[j - 1, i] * k
             if down:
                 s += z[j + 1, i] * k
             new[j, i] = s
+        if nx > 1:
+            _wave_vertex(z, zp, k, new, j, nx - 1, up, down)
+
+
+@kernel(inline="always")
+def _wave_vertex(z, zp, k, new, j, i, up, down):
+    """Eq. 2.8 at one vertex of a border column (neighbours beyond the border absent)."""
+    nx = z.shape[1]
+    left, right = i > 0, i < nx - 1
+    s = (2.0 - k * (0.0 + left + right + up + down)) * z[j, i] - zp[j, i]
+    if left:
+        s += z[j, i - 1] * k
+    if right:
+        s += z[j, i + 1] * k
+    if up:
+        s += z[j - 1, i] * k
+    if down:
+        s += z[j + 1, i] * k
+    new[j, i] = s
 
 
 @kernel
-def wave_step(z, zp, k, coefficient, degree, solid, mask, g, p, w, a, b, w2, points, points_prev, new):
+def wave_step(z, zp, k, degree, solid, mask, g, p, w, a, b, w2, points, points_prev, new, slots):
     """One step of eq. 2.8–2.12 (``waves.propagate``): the grid by :func:`wave_grid` into ``new`` (may be ``zp``),
     then the water vertices next to bodies (``solid``: they lose those neighbours, the wave reflects) or to added
     points (pairs ``g``, ``p``, ``w``) again with their own neighbours (eq. 2.11, k lowered to 2/D where the added
     neighbours raise the sum of weights D above 4), and the added points from the grid vertices and points within
-    radius h (eq. 2.12; point pairs ``a``, ``b``, ``w2``). Returns the added points' heights at t + 1."""
+    radius h (eq. 2.12; point pairs ``a``, ``b``, ``w2``). ``slots``: an int64 work array of at least the grid's
+    size (its contents do not matter). Returns the added points' heights at t + 1."""
     nz, nx = z.shape
     zf, zpf, mf = z.ravel(), zp.ravel(), mask.ravel()
     # eq. 2.11: per touched vertex, its extra sums in order of entry (solid neighbours first, then point pairs)
     entries = 4 * len(solid) + len(g)
-    vertex = np.empty(entries, np.int64)
-    slot = np.full(z.size, -1, np.int64) if entries > 0 else np.empty(0, np.int64)
-    s_extra = np.empty(entries)
-    d_extra = np.empty(entries)
-    u = 0
-    for q in range(len(solid)):
+    touched = np.empty(entries, np.int64)
+    value = np.empty(entries)
+    weight = np.empty(entries)
+    e = 0
+    for q in range(len(solid)):  # water neighbours (+u, −u, +v, −v) of the vertices inside bodies lose them
         c = solid[q]
         ci, cj = c % nx, c // nx
         held = -zf[c]
@@ -826,24 +913,27 @@ def wave_step(z, zp, k, coefficient, degree, solid, mask, g, p, w, a, b, w2, poi
                 t = c - nx
             if mf[t]:
                 continue
-            if slot[t] < 0:
-                slot[t] = u
-                vertex[u] = t
-                s_extra[u] = 0.0
-                d_extra[u] = 0.0
-                u += 1
-            s_extra[slot[t]] += held
-            d_extra[slot[t]] += -1.0
-    for q in range(len(g)):
-        t = g[q]
-        if slot[t] < 0:
-            slot[t] = u
-            vertex[u] = t
-            s_extra[u] = 0.0
-            d_extra[u] = 0.0
+            touched[e], value[e], weight[e] = t, held, -1.0
+            e += 1
+    for q in range(len(g)):  # and the vertices near added points gain them (weight r_k / h)
+        touched[e], value[e], weight[e] = g[q], w[q] * points[p[q]], w[q]
+        e += 1
+    for q in range(e):  # group by vertex through ``slots`` (only entries written here are read back)
+        slots[touched[q]] = q
+    vertex = np.empty(e, np.int64)
+    group = np.empty(e, np.int64)
+    u = 0
+    for q in range(e):
+        if slots[touched[q]] == q:
+            vertex[u] = touched[q]
+            group[q] = u
             u += 1
-        s_extra[slot[t]] += w[q] * points[p[q]]
-        d_extra[slot[t]] += w[q]
+    s_extra = np.zeros(u)
+    d_extra = np.zeros(u)
+    for q in range(e):
+        r = group[slots[touched[q]]]
+        s_extra[r] += value[q]
+        d_extra[r] += weight[q]
     special = np.empty(u)
     for q in range(u):
         c = vertex[q]
@@ -881,7 +971,7 @@ def wave_step(z, zp, k, coefficient, degree, solid, mask, g, p, w, a, b, w2, poi
         else:
             kn = min(k, 2.0 / d)
             new_points[i] = 2.0 * points[i] - points_prev[i] + kn * (s - d * points[i])
-    wave_grid(z, zp, k, coefficient, new)
+    wave_grid(z, zp, k, new)
     nf = new.ravel()
     for q in range(u):
         nf[vertex[q]] = special[q]
@@ -898,6 +988,15 @@ def carried(known, known_heights, known_previous, keys, uv, z, zp):
     m = len(keys)
     heights = np.empty(m)
     previous = np.empty(m)
+    same = len(known) == m
+    for i in range(m if same else 0):
+        if known[i] != keys[i]:
+            same = False
+            break
+    if same:  # the same points as last step
+        heights[:] = known_heights
+        previous[:] = known_previous
+        return heights, previous
     order = np.argsort(known)
     sorted_keys = known[order]
     for i in range(m):
@@ -948,3 +1047,104 @@ def finish(z, new, solid, owner, levels, unique, volume, damping, new_points, ch
         for i in range(len(new_points)):
             new_points[i] = new_points[i] + shift
     return previous_points
+
+
+@kernel
+def previous_table(known, known_polygons, known_counts, known_table, cached, entities, width):
+    """``surface._previous``: the edge table of each body's cross-section at t − 1 (padded or cut to ``width``)
+    and whether it had one (3 or more vertices). The same bodies as last step: their table as it was
+    (``known_table`` when ``cached``)."""
+    nb = len(entities)
+    same = len(known) == nb and known_polygons.shape[1] == width and len(known_counts) == nb
+    for b in range(nb if same else 0):
+        if known[b] != entities[b]:
+            same = False
+            break
+    if same:
+        old = np.empty(nb, np.bool_)
+        for b in range(nb):
+            old[b] = known_counts[b] >= 3
+        return (known_table if cached else edge_table(known_polygons, known_counts)), old
+    polygons = np.zeros((nb, width, 2))
+    counts = np.zeros(nb, np.int64)
+    old = np.zeros(nb, np.bool_)
+    w = min(width, known_polygons.shape[1])
+    for b in range(nb):
+        for src in range(len(known)):
+            if known[src] == entities[b]:
+                polygons[b, :w] = known_polygons[src, :w]
+                counts[b] = min(known_counts[src], w)
+                old[b] = counts[b] >= 3
+                break
+    return edge_table(polygons, counts), old
+
+
+# ------------------------------------------------------------------------------------------- the whole step
+@kernel
+def outline_step(z, zp, k, degree, new, corners, shapes, position, radius, plane_y, levels, ring, edge_a, edge_b,
+                 shared_face, x0, z0, h, width, entities, known_keys, known_heights, known_previous, known_entities,
+                 known_polygons, known_counts, known_table, cached, alpha, volume, damping, slots):
+    """One step of the outline method after the plane levels (``surface._outline_step``): cross-sections D'
+    (``corners`` (B, 3, 8) of the boxes, spheres by ``ring``), nudged; added points; their carried heights; the
+    waves they make (eq. 2.5–2.7, against D'(t − 1): :func:`previous_table`); the vertices inside
+    bodies; the coupling pairs; eq. 2.8–2.12 into ``new``; volume and damping.
+
+    Returns its results packed in three buffers (boxing an array for Python costs about a microsecond: one
+    buffer per type instead of one array per result), the mask of the vertices inside bodies and the sizes:
+    floats (uv (M, 2), change, new point heights, point heights at t (M each), polygons (B, W, 2), edge table of
+    D'(t) (B, W, 9)), integers (keys, body (M each), segments (K, 2), solid (S), unique solid (U), counts (B),
+    vertex and edge features (B, W each)), bytes (kind, raised, lowered (M each)); mask; M, K, S, U.
+    """
+    nz, nx = z.shape
+    nb = len(shapes)
+    polygons = np.zeros((nb, width, 2))
+    counts = np.zeros(nb, np.int64)
+    vfeat = np.zeros((nb, width), np.int64)
+    efeat = np.zeros((nb, width), np.int64)
+    boxes = np.empty(nb, np.int64)
+    spheres = np.empty(nb, np.int64)
+    n_box, n_sphere = 0, 0
+    for b in range(nb):
+        if shapes[b] == 0:
+            boxes[n_box] = b
+            n_box += 1
+        else:
+            spheres[n_sphere] = b
+            n_sphere += 1
+    if n_box:
+        box_sections(corners, plane_y, edge_a, edge_b, shared_face, x0, z0, h, polygons, counts, vfeat, efeat,
+                     boxes[:n_box])
+    if n_sphere:
+        sphere_sections(position, radius, plane_y, ring, x0, z0, h, polygons, counts, vfeat, efeat,
+                        spheres[:n_sphere])
+    nudge(polygons, counts)
+    uv, kind, keys, body, segments = added_points(polygons, counts, vfeat, efeat, entities, nx, nz)
+    heights, previous = carried(known_keys, known_heights, known_previous, keys, uv, z, zp)
+    before, old = previous_table(known_entities, known_polygons, known_counts, known_table, cached, entities, width)
+    after = edge_table(polygons, counts)
+    change, raised, lowered = outline_impulse(uv, body, before, old, after, h, alpha, nb)
+    solid, owner = solid_vertices(after, counts, nx, nz)
+    mask, unique = solid_mask(solid, nz, nx)
+    g, p, w = grid_pairs(uv, mask, nx, nz)
+    a, b2, w2 = point_pairs(uv, nx, nz)
+    new_points = wave_step(z, zp, k, degree, solid, mask, g, p, w, a, b2, w2, heights, previous, new, slots)
+    previous_points = finish(z, new, solid, owner, levels, unique, volume, damping, new_points, change, heights)
+    m, n_seg, n_solid, n_unique, bw = len(uv), len(segments), len(solid), len(unique), nb * width
+    floats = np.empty(5 * m + 11 * bw)
+    floats[:2 * m] = uv.ravel()
+    floats[2 * m:3 * m] = change
+    floats[3 * m:4 * m] = new_points
+    floats[4 * m:5 * m] = previous_points
+    floats[5 * m:5 * m + 2 * bw] = polygons.ravel()
+    floats[5 * m + 2 * bw:] = after.ravel()
+    ints = np.empty(2 * m + 2 * n_seg + n_solid + n_unique + nb + 2 * bw, np.int64)
+    at = 0
+    for part in (keys, body, segments.ravel(), solid, unique, counts, vfeat.ravel(), efeat.ravel()):
+        ints[at:at + len(part)] = part
+        at += len(part)
+    small = np.empty(3 * m, np.int8)
+    small[:m] = kind
+    for i in range(m):
+        small[m + i] = 1 if raised[i] else 0
+        small[2 * m + i] = 1 if lowered[i] else 0
+    return floats, ints, small, mask, m, n_seg, n_solid, n_unique

@@ -196,16 +196,21 @@ def step_water(state: WaterState, cfg: WaterSurface, grid: Grid, bodies: Bodies,
         state.degree = free_degree(*state.heights.shape)
         state.coefficient = 2.0 - k * state.degree
         state.coefficient_k = k
-    volume = K.water_mean(state.heights, _solid_flat(state))
-    if cfg.disturbance_rate > 0.0 or state.splashes:
+    pending = cfg.disturbance_rate > 0.0 or bool(state.splashes)
+    volume = K.water_mean(state.heights, _solid_flat(state)) if pending else 0.0
+    if pending:  # the volume to keep is the water's before the drops
         _disturb(state, cfg, grid, dt, rng)
     z = state.heights
-    if len(bodies):
-        near = K.near_bodies(bodies.extent(), bodies.position, grid.x0, grid.z0, grid.h, grid.nx, grid.nz, grid.y0,
-                             float(cfg.depth), z)
-        if not all_of(near, axis=None):
-            bodies = bodies.take(near)
-    levels = _plane_levels(z, state.solid, bodies, grid)
+    measured, near, n_near, levels, fallback = K.bodies_in_water(
+        z, state.solid, _solid_flat(state), not pending, bodies.shapes, bodies.half, bodies.radius, bodies.position,
+        bodies.rotation, grid.x0, grid.z0, grid.h, grid.y0, float(cfg.depth))
+    if not pending:
+        volume = measured
+    if n_near < len(bodies):
+        bodies = bodies.take(near)
+    if any_of(fallback, axis=None):  # a huge window all inside bodies: its mean as numpy buffers it
+        index = fallback.nonzero()[0]
+        levels[index] = plane_levels(z, state.solid, bodies.take(index), grid)
     plane_y = grid.y0 + levels
     if cfg.wave_source == "outline":
         report = _outline_step(state, cfg, grid, bodies, levels, plane_y, k, volume)
@@ -224,87 +229,52 @@ def _solid_flat(state: WaterState) -> I64:
 
 
 _NO_INDEX = np.zeros(0, np.int64)
-
-
-def _plane_levels(z: F64, solid: np.ndarray, bodies: Bodies, grid: Grid) -> F64:
-    """:func:`plane_levels` by its kernel (a huge all-solid window's mean by numpy)."""
-    centre = (bodies.position[:, ::2] - (grid.x0, grid.z0)) / grid.h
-    levels, fallback = K.plane_levels(z, solid, centre, bodies.horizontal_half() / grid.h)
-    if any_of(fallback, axis=None):
-        index = fallback.nonzero()[0]
-        levels[index] = plane_levels(z, solid, bodies.take(index), grid)
-    return levels
+_NO_TABLE = np.zeros((0, 0, 9))
 
 
 _CORNERS_T = np.ascontiguousarray(np.array([[sx, sy, sz] for sx in (-1.0, 1.0) for sy in (-1.0, 1.0)
                                             for sz in (-1.0, 1.0)]).T)  # (3, 8) box corners, coordinate-major
 
 
-def _sections(bodies: Bodies, plane_y: F64, grid: Grid, segments: int) -> Sections:
-    """Cross-sections D' (``outline.cross_sections``), nudged off the grid lines (``outline.nudge``)."""
+def _outline_step(state, cfg, grid, bodies, levels, plane_y, k, volume) -> StepReport:
+    """The paper's method: added points on the outline make and reflect the waves (one kernel, kernels.py)."""
+    z, zp = state.heights, state.previous
     n = len(bodies)
     is_box = bodies.shapes == BOX
     boxes, spheres = bool(any_of(is_box, axis=None)), not bool(all_of(is_box, axis=None))
+    segments = cfg.sphere_segments
     width = max(MAX_BOX_VERTICES if boxes else 0, segments if spheres else 0, 3)
-    polygons = np.zeros((n, width, 2))
-    counts = np.zeros(n, np.int64)
-    vfeat = np.zeros((n, width), np.int64)
-    efeat = np.zeros((n, width), np.int64)
     if boxes:
-        rows = np.arange(n) if not spheres else is_box.nonzero()[0]
         corners = bodies.rotation @ (_CORNERS_T * bodies.half[:, :, None]) + bodies.position[:, :, None]
-        K.box_sections(corners, plane_y, EDGE_A, EDGE_B, SHARED_FACE, grid.x0, grid.z0, grid.h, polygons, counts,
-                       vfeat, efeat, rows)
-    if spheres:
-        K.sphere_sections(bodies.position, bodies.radius, plane_y, sphere_ring(segments), grid.x0, grid.z0, grid.h,
-                          polygons, counts, vfeat, efeat, (~is_box).nonzero()[0])
-    K.nudge(polygons, counts)
-    return Sections(polygons, counts, vfeat, efeat)
-
-
-def _previous_table(state: WaterState, bodies: Bodies, width: int) -> tuple[F64, np.ndarray]:
-    """Edge table of each body's cross-section at t − 1 (padded to ``width``) and whether it had one (3 or more
-    vertices)."""
-    known = state.body_entities
-    if (len(known) == len(bodies) and state.polygons.shape[1] == width and len(state.polygon_counts) == len(known)
-            and np.array_equal(known, bodies.entities)):  # the same bodies as last step
-        cached = state.section_edges
-        if cached is not None and cached[0] is state.polygons:
-            table = cached[1]
-        else:
-            table = K.edge_table(state.polygons, state.polygon_counts)
-        return table, state.polygon_counts >= 3
-    before, has = _previous(state, bodies, width)
-    return K.edge_table(before.polygons, before.counts), has & (before.counts >= 3)
-
-
-def _outline_step(state, cfg, grid, bodies, levels, plane_y, k, volume) -> StepReport:
-    """The paper's method: added points on the outline make and reflect the waves (kernels.py)."""
-    z, zp = state.heights, state.previous
-    sections = _sections(bodies, plane_y, grid, cfg.sphere_segments)
-    uv, kind, keys, body, segments = K.added_points(sections.polygons, sections.counts, sections.vertex_feature,
-                                                    sections.edge_feature, bodies.entities, grid.nx, grid.nz)
-    points = AddedPoints(uv, kind, keys, body, segments)
-    heights, previous = K.carried(state.point_keys, state.point_heights, state.point_previous, keys, uv, z, zp)
-    after = K.edge_table(sections.polygons, sections.counts)
-    before, old = _previous_table(state, bodies, sections.polygons.shape[1])
-    change, raised, lowered = K.outline_impulse(uv, body, before, old, after, grid.h, cfg.outline_constant,
-                                                len(bodies))
-    solid, owner = K.solid_vertices(after, sections.counts, grid.nx, grid.nz)
-    state.solid, unique = K.solid_mask(solid, grid.nz, grid.nx)
-    state.solid_index = (state.solid, unique)
-    g, p, w = K.grid_pairs(uv, state.solid, grid.nx, grid.nz)
-    a, b, w2 = K.point_pairs(uv, grid.nx, grid.nz)
+    else:
+        corners = np.zeros((n, 3, 8))
+    cached = state.section_edges is not None and state.section_edges[0] is state.polygons
     new = zp if zp.flags.c_contiguous and zp.flags.writeable else np.empty_like(z)
-    new_points = K.wave_step(z, zp, k, state.coefficient, state.degree, solid, state.solid, g, p, w, a, b, w2,
-                             heights, previous, new)
-    previous_points = K.finish(z, new, solid, owner, levels, unique, volume, cfg.damping, new_points, change,
-                               heights)
+    floats, ints, small, state.solid, m, n_seg, n_solid, n_unique = K.outline_step(
+        z, zp, k, state.degree, new, corners, bodies.shapes, bodies.position, bodies.radius, plane_y, levels,
+        sphere_ring(segments), EDGE_A, EDGE_B, SHARED_FACE, grid.x0, grid.z0, grid.h, width, bodies.entities,
+        state.point_keys, state.point_heights, state.point_previous, state.body_entities, state.polygons,
+        state.polygon_counts, state.section_edges[1] if cached else _NO_TABLE, cached, cfg.outline_constant, volume,
+        cfg.damping, _slots(state))
+    bw = n * width  # unpack (views): see kernels.outline_step
+    uv, change = floats[:2 * m].reshape(m, 2), floats[2 * m:3 * m]
+    new_points, previous_points = floats[3 * m:4 * m], floats[4 * m:5 * m]
+    polygons, after = floats[5 * m:5 * m + 2 * bw].reshape(n, width, 2), floats[5 * m + 2 * bw:].reshape(n, width, 9)
+    keys, body = ints[:m], ints[m:2 * m]
+    at = 2 * m + 2 * n_seg
+    outline = ints[2 * m:at].reshape(n_seg, 2)
+    solid, unique = ints[at:at + n_solid], ints[at + n_solid:at + n_solid + n_unique]
+    at += n_solid + n_unique
+    counts, features = ints[at:at + n], ints[at + n:].reshape(2, n, width)
+    kind, flags = small[:m], small[m:].view(np.bool_)
+    state.solid_index = (state.solid, unique)
     state.previous, state.heights = z, new
     state.point_keys, state.point_uv, state.point_kind = keys, uv, kind
-    state.point_heights, state.point_previous, state.segments = new_points, previous_points, segments
-    state.section_edges = (sections.polygons, after)  # next step's D'(t − 1) edges
-    return StepReport(bodies, plane_y, sections, points, change, raised, lowered, solid)
+    state.point_heights, state.point_previous, state.segments = new_points, previous_points, outline
+    state.section_edges = (polygons, after)  # next step's D'(t − 1) edges
+    sections = Sections(polygons, counts, features[0], features[1])
+    points = AddedPoints(uv, kind, keys, body, outline)
+    return StepReport(bodies, plane_y, sections, points, change, flags[:m], flags[m:], solid)
 
 
 def _grid_method_step(state, cfg, grid, bodies, levels, plane_y, k, volume) -> StepReport:
