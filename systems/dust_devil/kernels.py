@@ -166,3 +166,60 @@ def advance_particles(positions, ages, lifetimes, dead, flat, known, dims, grid_
         dead[i] = (ux_ < 0.0 or ux_ > 1.0 or uy_ < 0.0 or uy_ > 1.0 or uz_ < 0.0 or uz_ > 1.0
                    or ages[i] >= lifetimes[i])
     return made
+
+
+@kernel(inline="always")
+def _ground_height(x, z, heights, x_lo, z_lo, spacing):
+    """HeightField.height_at at one point (bilinear, clamped to the grid), in its order of operations."""
+    rows, cols = heights.shape
+    gx = min(max((x - x_lo) / spacing, 0.0), cols - 1)
+    gz = min(max((z - z_lo) / spacing, 0.0), rows - 1)
+    c0, r0 = min(int(gx), cols - 2), min(int(gz), rows - 2)
+    tx, tz = gx - c0, gz - r0
+    top = heights[r0, c0] + tx * (heights[r0, c0 + 1] - heights[r0, c0])
+    bottom = heights[r0 + 1, c0] + tx * (heights[r0 + 1, c0 + 1] - heights[r0 + 1, c0])
+    return top + tz * (bottom - top)
+
+
+@kernel
+def emit_particles(draws, cos_angle, sin_angle, centre, emission_radius, half_x, half_z, box_position, terrain,
+                   heights, ground_origin, spacing, ground_position, finish, feet, positions, ages, lifetimes,
+                   which, emission_height, size_y, lifetime, jitter):
+    """One pass of simulate.emit's placement for the emitted particles i (row i of ``draws``, the numpy
+    stream's uniform draws; ``cos_angle``/``sin_angle`` of 2π draws[:, 1] come from numpy too, float64).
+
+    A point uniform in the disc of ``emission_radius`` (radius R sqrt(u0), angle 2π u1) around the vortex centre
+    line's field-space (x, z) ``centre`` (one row for all, or one per particle), clamped into the box, on the box
+    floor; in world space (+ the box's position) lifted onto the ground with ``terrain``.  ``finish`` False:
+    ``feet[i]`` = its field-space height (where simulate.emit looks the centre line up again).  ``finish``
+    True: then up by ``emission_height`` u2, capped at the box top, into ``positions[which[i]]`` with age 0 and
+    lifetime L (1 - jitter u3).  The numpy code's operations in its order (the ground and the box are not
+    rotated and the box has unit scale: up is +y, field space = world - box position)."""
+    x_lo, z_lo = ground_origin[0], ground_origin[1]
+    shared = centre.shape[0] == 1
+    for i in range(draws.shape[0]):
+        c = 0 if shared else i
+        radius = emission_radius * np.sqrt(draws[i, 0])
+        lx = min(max(centre[c, 0] + radius * cos_angle[i], -half_x), half_x)
+        lz = min(max(centre[c, 1] + radius * sin_angle[i], -half_z), half_z)
+        wx, wy, wz = lx + box_position[0], 0.0 + box_position[1], lz + box_position[2]
+        if terrain:  # Ground.lift: points below the surface move up onto it
+            depth = _ground_height(wx - ground_position[0], wz - ground_position[2], heights, x_lo, z_lo,
+                                   spacing) - (wy - ground_position[1])
+            if depth > 0.0:
+                wx += depth * 0.0
+                wy += depth * 1.0
+                wz += depth * 0.0
+        if not finish:
+            feet[i] = wy - box_position[1]
+            continue
+        rise = emission_height * draws[i, 2]
+        wx += rise * 0.0
+        wy += rise * 1.0
+        wz += rise * 0.0
+        k = which[i]
+        positions[k, 0] = wx - box_position[0]
+        positions[k, 1] = min(wy - box_position[1], size_y)
+        positions[k, 2] = wz - box_position[2]
+        ages[k] = 0.0
+        lifetimes[k] = lifetime * (1.0 - jitter * draws[i, 3])

@@ -150,6 +150,10 @@ def emit(cfg: DustDevilConfig, state: DustDevilState, which: NDArray[np.intp], t
     if n == 0:
         return
     draws = rng.random((n, 4))
+    terrain = ground is not None and cfg.terrain_interaction
+    if USE_KERNELS and _kernel_case(transform, ground if terrain else None):
+        _emit_kernel(cfg, state, which, transform, ground if terrain else None, draws)
+        return
     radius = cfg.emission_radius * np.sqrt(draws[:, 0])
     angle = 2.0 * np.pi * draws[:, 1]
     offset = np.stack([radius * np.cos(angle), radius * np.sin(angle)], axis=-1)
@@ -171,10 +175,52 @@ def emit(cfg: DustDevilConfig, state: DustDevilState, which: NDArray[np.intp], t
     state.lifetimes[which] = cfg.particle_lifetime * (1.0 - cfg.lifetime_jitter * draws[:, 3])
 
 
+def _emit_kernel(cfg: DustDevilConfig, state: DustDevilState, which: NDArray[np.intp], transform: Transform,
+                 ground: Ground | None, draws: F64) -> None:
+    """:func:`emit` after its random draws, as two passes of the compiled kernels.emit_particles (the same
+    bits): the particles' feet on the ground under the centre line's foot, then, with the centre line looked up
+    at those heights, their final places.  The float64 sin and cos stay in numpy (the angle, the centre line)."""
+    from systems.dust_devil.kernels import emit_particles
+
+    angle = 2.0 * np.pi * draws[:, 1]
+    cos_angle, sin_angle = np.cos(angle), np.sin(angle)
+    sx, sy, sz = cfg.field_size
+    heights, origin, spacing, ground_position = _ground_args(ground)
+    feet = np.empty(len(draws))
+    state.positions = np.ascontiguousarray(state.positions, dtype=np.float64)  # written in place (no copy if so)
+    state.ages = np.ascontiguousarray(state.ages, dtype=np.float64)
+    state.lifetimes = np.ascontiguousarray(state.lifetimes, dtype=np.float64)
+    args = (float(cfg.emission_radius), 0.5 * sx, 0.5 * sz, np.asarray(transform.position, dtype=np.float64),
+            ground is not None, heights, origin, spacing, ground_position)
+    finish = (state.positions, state.ages, state.lifetimes, np.ascontiguousarray(which, dtype=np.intp),
+              float(cfg.emission_height), float(sy), float(cfg.particle_lifetime), float(cfg.lifetime_jitter))
+    # the centre line at the box floor (the same for every particle), then at each particle's foot
+    emit_particles(draws, cos_angle, sin_angle, centre_at(cfg, state, np.zeros(1)), *args, False, feet, *finish)
+    emit_particles(draws, cos_angle, sin_angle, centre_at(cfg, state, feet), *args, True, feet, *finish)
+
+
+def _ground_args(ground: Ground | None) -> tuple[F64, F64, float, F64]:
+    """(heights, origin, spacing, position) of the ground for the kernels; a flat dummy without one."""
+    if ground is None:
+        return _NO_GROUND
+    field = ground.field
+    position = np.zeros(3) if ground.transform is None else np.asarray(ground.transform.position, dtype=np.float64)
+    return field.heights, np.asarray(field.origin, dtype=np.float64), float(field.spacing), position
+
+
+_NO_GROUND = (np.zeros((2, 2)), np.zeros(2), 1.0, np.zeros(3))
+
+
 def _update_wind(cfg: DustDevilConfig, state: DustDevilState) -> WindField:
-    state.wind = WindField(cfg.grid_resolution, cfg.field_size, state.field_time, state.centre_rotation,
-                           cfg.wind_scale)
-    return state.wind
+    """The step's wind field (2.1): the last step's field object reset to the new instant when the grid has the
+    same resolution (its arrays are reused: no allocation and page faults per step), else a new one."""
+    wind = state.wind
+    if isinstance(wind, WindField) and wind.resolution == tuple(cfg.grid_resolution):
+        wind.reset(cfg.field_size, state.field_time, state.centre_rotation, cfg.wind_scale)
+    else:
+        state.wind = wind = WindField(cfg.grid_resolution, cfg.field_size, state.field_time,
+                                      state.centre_rotation, cfg.wind_scale)
+    return wind
 
 
 def _velocity(cfg: DustDevilConfig, wind: WindField, size: F64, local: F64, h: float) -> F64:
@@ -240,13 +286,7 @@ def _advance_kernel(cfg: DustDevilConfig, state: DustDevilState, transform: Tran
     positions = np.ascontiguousarray(state.positions, dtype=np.float64)
     ages = np.ascontiguousarray(state.ages, dtype=np.float64)
     dead = np.empty(len(positions), dtype=np.bool_)
-    if ground is not None:
-        field = ground.field
-        heights, origin, spacing = field.heights, np.asarray(field.origin, dtype=np.float64), float(field.spacing)
-        ground_position = (np.zeros(3) if ground.transform is None
-                           else np.asarray(ground.transform.position, dtype=np.float64))
-    else:
-        heights, origin, spacing, ground_position = np.zeros((2, 2)), np.zeros(2), 1.0, np.zeros(3)
+    heights, origin, spacing, ground_position = _ground_args(ground)
     wind.evaluated += advance_particles(
         positions, ages, np.ascontiguousarray(state.lifetimes, dtype=np.float64), dead, wind._flat, wind._known,
         wind.dims.astype(np.int64), wind.kernel_args(), cfg.lookup == "trilinear", cfg.integrator == "midpoint",

@@ -154,6 +154,15 @@ class WindField:
         self._flat = np.empty((self.nodes, 3))  # grid values, valid where _known
         self._known = np.zeros(self.nodes, bool)
         self.evaluated = 0  # formula evaluations so far (tests, profiling)
+        ux, uy, uz = grid_points(self.resolution)
+        self._lines = (ux, 1.0 - uz, uy)  # the grid lines in Crawfis' axes (x, y, z), for kernel_args
+
+    def reset(self, size: ArrayLike, t: float, rotation: float, wind_scale: float) -> None:
+        """The field at another instant on the same grid: every grid point unknown again (the arrays are kept,
+        so a step allocates nothing)."""
+        self.size, self.t, self.rotation, self.wind_scale = size, t, rotation, wind_scale
+        self._known.fill(False)
+        self.evaluated = 0
 
     @property
     def grid(self) -> F64:
@@ -181,10 +190,9 @@ class WindField:
         """What :func:`systems.dust_devil.kernels.advance_particles` evaluates grid points from: the unit
         coordinates of the grid lines (ux, 1 - uz, uy), the per-height terms (xc, yc, r, r2; the float64
         trigonometry, by numpy as in :func:`wind_at_nodes`), the box size and the wind scale."""
-        ux, uy, uz = grid_points(self.resolution)
+        ux, cy, uy = self._lines
         xc, yc, r, r2 = _slices(uy, self.t, self.rotation)
-        return (ux, 1.0 - uz, uy, xc, yc, r, r2, np.asarray(self.size, dtype=np.float64),
-                float(self.wind_scale))
+        return (ux, cy, uy, xc, yc, r, r2, np.asarray(self.size, dtype=np.float64), float(self.wind_scale))
 
     def sample(self, unit: F64, mode: str = "nearest") -> F64:
         """Velocity (N, 3) at unit coordinates (N, 3), as :func:`sample_wind` on the whole grid."""

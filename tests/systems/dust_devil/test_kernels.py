@@ -1,4 +1,5 @@
-"""The compiled particle step (systems/dust_devil/kernels.py) gives the numpy step's bits (seeds/004)."""
+"""The compiled particle step and emission (systems/dust_devil/kernels.py) give the numpy step's bits
+(seeds/004)."""
 
 import numpy as np
 import pytest
@@ -15,6 +16,7 @@ CASES = {
     "no terrain": dict(terrain=False),
     "terrain interaction off": dict(terrain_interaction=False),
     "odd grid, strong wind": dict(grid_resolution=[12, 20, 9], wind_scale=2.5, emission_radius=3.0),
+    "emission clamped into the box": dict(emission_radius=20.0, emission_height=40.0, particle_lifetime=0.5),
 }
 
 
@@ -68,3 +70,25 @@ def test_kernel_case_only_for_unrotated_unscaled_boxes(tmp_path, monkeypatch):
     monkeypatch.setattr(kernels, "advance_particles", lambda *a: calls.append(1) or original(*a))
     state, _ = _run(tmp_path, True, monkeypatch, steps=3, drag_at=1, particle_count=50, prewarm_time=0.0)
     assert len(calls) == 3  # the bench's and the presets' case takes the kernel
+
+
+def test_emission_takes_the_kernel_and_reuses_the_wind_grid(tmp_path, monkeypatch):
+    """Re-emission runs kernels.emit_particles (two passes per emission: feet, then places), and the wind field
+    object and its arrays are kept from step to step (reset, not reallocated)."""
+    from systems.dust_devil import kernels
+
+    calls = []
+    original = kernels.emit_particles
+    monkeypatch.setattr(kernels, "emit_particles", lambda *a: calls.append(a[13]) or original(*a))
+    path = tmp_path / "scene.toml"
+    path.write_text(scene_text(particle_count=50, prewarm_time=0.0, particle_lifetime=0.05), encoding="utf-8")
+    app = App(path, strict=True)
+    app.step(1)
+    _, _, _, state = devil(app)
+    wind, flat = state.wind, state.wind._flat
+    first = len(calls)
+    assert first >= 2 and calls[:2] == [False, True]  # the first emission (and re-emissions within the step)
+    app.step(3)
+    assert len(calls) > first and calls == [False, True] * (len(calls) // 2)  # re-emissions: pairs of passes
+    assert state.wind is wind and state.wind._flat is flat and state.wind._known.any()
+    assert state.wind.evaluated == state.wind._known.sum()  # counted from zero at this step's reset
