@@ -190,7 +190,7 @@ class DustDevilParticles(RenderFeature):
         self.declared_repeats: dict[tuple[int, str], int] = {}  # (entity, view) -> R of the last declared frame
         self.scatter: bool | None = None  # the coverage-word scatter path; None: probed at the first PBVR frame
         self.compute = False  # the scatter as a compute shader (GL 4.3); else in the vertex stage (GL 4.2)
-        self._resolve: dict[str, moderngl.VertexArray] = {}
+        self._resolve: dict[tuple[str, str], moderngl.VertexArray] = {}
         self._seed = 0  # the scene's random seed (the offset table is drawn from it)
         self._ball: tuple[int, moderngl.Buffer] | None = None  # (seed, uniform buffer of ball_offsets(seed))
         # (entity, view) -> (size, texture): the persistent coverage words, zero between frames
@@ -236,13 +236,15 @@ class DustDevilParticles(RenderFeature):
             self._uploaded[devil.entity] = frame
         return buf
 
-    def _resolve_vao(self, fragment: str) -> moderngl.VertexArray:
-        """A full-screen triangle with ``shaders/<fragment>.frag``."""
-        vao = self._resolve.get(fragment)
+    def _resolve_vao(self, fragment: str, define: str = "") -> moderngl.VertexArray:
+        """A full-screen triangle with ``shaders/<fragment>.frag`` (``define``: a ``#define`` line's text after
+        its ``#version`` line, a variant)."""
+        vao = self._resolve.get((fragment, define))
         if vao is None:
-            prog = self.renderer.program((ENGINE_SHADERS / "fullscreen.vert").read_text(),
-                                         (SHADERS / f"{fragment}.frag").read_text())
-            vao = self._resolve[fragment] = self.ctx.vertex_array(prog, [])
+            version, rest = (SHADERS / f"{fragment}.frag").read_text().split("\n", 1)
+            source = f"{version}\n#define {define}\n{rest}" if define else f"{version}\n{rest}"
+            prog = self.renderer.program((ENGINE_SHADERS / "fullscreen.vert").read_text(), source)
+            vao = self._resolve[(fragment, define)] = self.ctx.vertex_array(prog, [])
         return vao
 
     def _bind_ball(self, program) -> None:
@@ -284,14 +286,14 @@ class DustDevilParticles(RenderFeature):
             if self.ctx.version_code >= 430:
                 try:
                     self._compute(1)
-                    self._resolve_vao("pbvr_coverage")
+                    self._resolve_vao("pbvr_coverage", "WORDS 1")
                     self.scatter = self.compute = True
                 except (RuntimeError, moderngl.Error) as exc:
                     reasons.append(str(exc))
             if not self.scatter and self.ctx.version_code >= 420:
                 try:
                     self.renderer.load_program(SHADERS, "pbvr_scatter")
-                    self._resolve_vao("pbvr_coverage")
+                    self._resolve_vao("pbvr_coverage", "WORDS 1")
                     self.scatter = True
                 except (RuntimeError, moderngl.Error) as exc:  # e.g. no image stores in the vertex stage
                     reasons.append(str(exc))
@@ -403,8 +405,8 @@ class DustDevilParticles(RenderFeature):
             ctx.enable(moderngl.BLEND)
             ctx.blend_func = moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA
             pc.get(h["cov"]).bind_to_image(0, read=True, write=True, format=GL_R32UI)
-            vao = self._resolve_vao("pbvr_coverage")
-            set_uniforms(vao.program, view_height=view.height, words=words, color=devil.color,
+            vao = self._resolve_vao("pbvr_coverage", f"WORDS {words}")
+            set_uniforms(vao.program, view_height=view.height, color=devil.color,
                          inv_repeats=1.0 / devil.repeats)
             vao.render(moderngl.TRIANGLES, vertices=3)
             ctx.disable(moderngl.BLEND)
