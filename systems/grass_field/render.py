@@ -2,7 +2,8 @@
 
 Per field and view, one opaque pass draws the :class:`~systems.grass_field.frame.FramePlan` decided on the CPU:
 
-* levels 0-3: one instanced draw per level and primitive type (triangles; lines at level 2; points at level 3).
+* levels 0-3: one instanced draw per level and primitive type (triangles; lines at level 2; points at level 3),
+  the closed tubes of levels 0-1 (cylinder, square prism) in a draw of their own with back faces culled.
   The plant, mesh and plant-list data live in textures; instance ``i`` is the ``i``-th listed plant (the plan
   lists, per level, the plants of its cells that the frustum can see, nearest cells first; see
   ``shaders/plant.vert``);
