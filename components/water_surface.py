@@ -187,7 +187,7 @@ class WaterState:
     coefficient_k: float = field(default=-1.0, metadata={"hash": False})
     scratch: F64 | None = field(default=None, metadata={"hash": False})  # work array
     slots: NDArray[np.int64] | None = field(default=None, metadata={"hash": False})  # work array (flat indices)
-    section_edges: tuple | None = field(default=None, metadata={"hash": False})  # (polygons, their Edges) cache
+    section_edges: tuple | None = field(default=None, metadata={"hash": False})  # (polygons, their edge table) cache
     solid_index: tuple | None = field(default=None, metadata={"hash": False})  # (solid, its flat indices) cache
 
     @property

@@ -1,5 +1,7 @@
-"""One simulation step of a water surface with the bodies that cut it (pure numpy; the world-facing systems are in
-``simulate.py``).
+"""One simulation step of a water surface with the bodies that cut it (the world-facing systems are in
+``simulate.py``). The outline method runs as two compiled kernels (``kernels.py``: the arithmetic of the numpy
+functions of ``outline.py`` and ``waves.py`` in the same order, so the same bits, in two calls instead of
+hundreds of numpy calls); the older ``grid`` method stays in numpy.
 
 Order inside a step (seeds/003): random drops and impact dents → the plane S' of each body (mean water height
 under it) → cross-section D' (2.2.2), nudged (fig. 2.3) → added points (2.2.3) carrying their heights from the
@@ -15,10 +17,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from components.water_surface import WaterState, WaterSurface
-from systems.water_surface.geometry import (BOX, F64, I64, Bodies, Grid, all_of, any_of, bilinear, bilinear_fields,
-                                            ranges, sum_of)
-from systems.water_surface.grid_source import column_depths
 from systems.water_surface import kernels as K
+from systems.water_surface.geometry import BOX, F64, I64, Bodies, Grid, all_of, any_of, bilinear, ranges, sum_of
+from systems.water_surface.grid_source import column_depths
 from systems.water_surface.outline import (EDGE_A, EDGE_B, MAX_BOX_VERTICES, SHARED_FACE, AddedPoints, Sections,
                                            cross_sections, nudge, sphere_ring)
 from systems.water_surface.waves import courant_k, dents, free_degree, propagate
@@ -107,66 +108,6 @@ def _solid_index(state: WaterState) -> I64 | None:
     return index if len(index) else None
 
 
-def _near(bodies: Bodies, grid: Grid, state: WaterState, depth: float) -> np.ndarray:
-    """Bodies whose footprint overlaps the grid and whose vertical extent reaches the water (tracked a little
-    early: from two half heights above the highest wave)."""
-    extent = bodies.extent()
-    centre = grid.to_uv(bodies.position[:, ::2])
-    half = extent[:, ::2] / grid.h
-    over = all_of((centre + half >= 0.0) & (centre - half <= (grid.nx - 1, grid.nz - 1)), axis=1)
-    vertical, y = extent[:, 1], bodies.position[:, 1]
-    low = y - 2.0 * vertical
-    near = over & (y + vertical >= grid.y0 - depth)
-    # y − 2·half ≤ (max height) + y0: any one height bounds the maximum from below, so it settles most bodies
-    sure = low <= (float(state.heights.flat[0]) + grid.y0) + 1e-9
-    if not all_of(sure[near], axis=None):
-        near &= low <= (float(np.max(state.heights)) + grid.y0) + 1e-9
-    return near
-
-
-def _previous(state: WaterState, bodies: Bodies, width: int) -> tuple[Sections, np.ndarray]:
-    """Each body's cross-section at t − 1 (padded to ``width``) and whether it had one."""
-    known = state.body_entities
-    if (len(known) == len(bodies) and state.polygons.shape[1] == width and len(state.polygon_counts) == len(known)
-            and np.array_equal(known, bodies.entities)):  # the same bodies as last step: their sections as they are
-        sections = Sections(state.polygons, state.polygon_counts, state.polygon_counts, state.polygon_counts)
-        cached = state.section_edges
-        if cached is not None and cached[0] is state.polygons:
-            sections._edges = cached[1]
-        return sections, np.ones(len(bodies), bool)
-    polygons = np.zeros((len(bodies), width, 2))
-    counts = np.zeros(len(bodies), np.int64)
-    has = np.zeros(len(bodies), bool)
-    if len(known) and len(bodies):
-        sorter = np.argsort(known)
-        pos = np.minimum(np.searchsorted(known, bodies.entities, sorter=sorter), len(known) - 1)
-        src = sorter[pos]
-        has = known[src] == bodies.entities
-        w = min(width, state.polygons.shape[1])
-        polygons[has, :w] = state.polygons[src[has], :w]
-        counts[has] = np.minimum(state.polygon_counts[src[has]], w)
-    return Sections(polygons, counts, counts, counts), has
-
-
-def _carried(state: WaterState, points: AddedPoints, z: F64, zp: F64) -> tuple[F64, F64]:
-    """N_z(t), N_z(t − 1) of the added points: carried over by key from the last step, or lifted onto the
-    surface (eq. 2.2–2.4) for points that are new."""
-    known = state.point_keys
-    if len(known) == len(points) and len(state.point_heights) == len(known) and np.array_equal(known, points.keys):
-        return state.point_heights, state.point_previous  # the same points as last step (read only)
-    if not (len(known) and len(points)):
-        heights, previous = bilinear_fields((z, zp), points.uv)
-        return heights, previous
-    sorter = np.argsort(known)
-    src = sorter.take(np.minimum(np.searchsorted(known, points.keys, sorter=sorter), len(known) - 1))
-    same = known.take(src) == points.keys
-    heights, previous = state.point_heights.take(src), state.point_previous.take(src)
-    if not all_of(same, axis=None):  # only the new points are lifted onto the surface
-        new = (~same).nonzero()[0]
-        heights[new], previous[new] = bilinear_fields((z, zp), points.uv.take(new, axis=0))
-    return heights, previous
-
-
 def _disturb(state: WaterState, cfg: WaterSurface, grid: Grid, dt: float, rng: np.random.Generator | None) -> None:
     """Random drops (``disturbance_rate``) and pending impact dents, as displacements without velocity."""
     centres, heights, radius = [], [], max(cfg.disturbance_radius, grid.h)
@@ -187,10 +128,7 @@ def _disturb(state: WaterState, cfg: WaterSurface, grid: Grid, dt: float, rng: n
 
 def step_water(state: WaterState, cfg: WaterSurface, grid: Grid, bodies: Bodies, dt: float,
                rng: np.random.Generator | None = None) -> StepReport:
-    """Advance ``state`` by one fixed step ``dt`` with ``bodies`` at their new transforms.
-
-    The outline method runs as a few compiled kernels (``kernels.py``: the same arithmetic as the numpy functions
-    named in their docstrings, in the same order, so the same bits); the older ``grid`` method stays in numpy."""
+    """Advance ``state`` by one fixed step ``dt`` with ``bodies`` at their new transforms."""
     k = courant_k(cfg.wave_speed, cfg.spacing, dt)
     if state.degree is None or state.degree.shape != state.heights.shape or state.coefficient_k != k:
         state.degree = free_degree(*state.heights.shape)
