@@ -243,10 +243,11 @@ def near_bodies(extent, position, x0, z0, h, nx, nz, y0, depth, heights):
 
 @kernel
 def bodies_in_water(z, solid, solid_flat, need_volume, shapes, half, radius, position, rotation, x0, z0, h, y0,
-                    depth):
+                    depth, signs):
     """The start of a step (``surface.step_water``): the water's mean level (the volume to keep) when
     ``need_volume``, the bodies near the water (:func:`near_bodies`) and their plane levels S'_z − y0
-    (:func:`plane_levels`). Returns (volume, near, number near, levels of the near bodies, fallback)."""
+    (:func:`plane_levels`), and each body's box corners in its own frame, ``signs`` (3, 8) × half extents.
+    Returns (volume, near, number near, levels of the near bodies, fallback, local corners (B, 3, 8))."""
     nz, nx = z.shape
     volume = water_mean(z, solid_flat) if need_volume else 0.0
     extent = extents(shapes, half, radius, rotation)
@@ -263,7 +264,12 @@ def bodies_in_water(z, solid, solid_flat, need_volume, shapes, half, radius, pos
             size[r, 0], size[r, 1] = extent[b, 0] / h, extent[b, 2] / h
             r += 1
     levels, fallback = plane_levels(z, solid, centre, size)
-    return volume, near, count, levels, fallback
+    local = np.empty((len(shapes), 3, signs.shape[1]))
+    for b in range(len(shapes)):
+        for i in range(3):
+            for c in range(signs.shape[1]):
+                local[b, i, c] = signs[i, c] * half[b, i]
+    return volume, near, count, levels, fallback, local
 
 
 # ------------------------------------------------------------------------------------- cross-sections D'
@@ -1081,8 +1087,8 @@ def previous_table(known, known_polygons, known_counts, known_table, cached, ent
 
 # ------------------------------------------------------------------------------------------- the whole step
 @kernel
-def outline_step(z, zp, k, degree, new, corners, shapes, position, radius, plane_y, levels, ring, edge_a, edge_b,
-                 shared_face, x0, z0, h, width, entities, known_keys, known_heights, known_previous, known_entities,
+def outline_step(z, zp, k, degree, new, rotated, shapes, position, radius, plane_y, levels, ring, edge_a, edge_b,
+                 shared_face, x0, z0, h, entities, known_keys, known_heights, known_previous, known_entities,
                  known_polygons, known_counts, known_table, cached, alpha, volume, damping, slots):
     """One step of the outline method after the plane levels (``surface._outline_step``): cross-sections D'
     (``corners`` (B, 3, 8) of the boxes, spheres by ``ring``), nudged; added points; their carried heights; the
@@ -1093,10 +1099,19 @@ def outline_step(z, zp, k, degree, new, corners, shapes, position, radius, plane
     buffer per type instead of one array per result), the mask of the vertices inside bodies and the sizes:
     floats (uv (M, 2), change, new point heights, point heights at t (M each), polygons (B, W, 2), edge table of
     D'(t) (B, W, 9)), integers (keys, body (M each), segments (K, 2), solid (S), unique solid (U), counts (B),
-    vertex and edge features (B, W each)), bytes (kind, raised, lowered (M each)); mask; M, K, S, U.
+    vertex and edge features (B, W each)), bytes (kind, raised, lowered (M each)); mask; M, K, S, U, W.
     """
     nz, nx = z.shape
     nb = len(shapes)
+    n_box = 0
+    for b in range(nb):
+        n_box += 1 if shapes[b] == 0 else 0
+    width = max(MAX_BOX_VERTICES if n_box > 0 else 0, len(ring) if n_box < nb else 0, 3)
+    corners = np.empty_like(rotated)
+    for b in range(nb):
+        for i in range(3):
+            for c in range(rotated.shape[2]):
+                corners[b, i, c] = rotated[b, i, c] + position[b, i]
     polygons = np.zeros((nb, width, 2))
     counts = np.zeros(nb, np.int64)
     vfeat = np.zeros((nb, width), np.int64)
@@ -1147,4 +1162,4 @@ def outline_step(z, zp, k, degree, new, corners, shapes, position, radius, plane
     for i in range(m):
         small[m + i] = 1 if raised[i] else 0
         small[2 * m + i] = 1 if lowered[i] else 0
-    return floats, ints, small, mask, m, n_seg, n_solid, n_unique
+    return floats, ints, small, mask, m, n_seg, n_solid, n_unique, width

@@ -18,9 +18,9 @@ import numpy as np
 
 from components.water_surface import WaterState, WaterSurface
 from systems.water_surface import kernels as K
-from systems.water_surface.geometry import BOX, F64, I64, Bodies, Grid, all_of, any_of, bilinear, ranges, sum_of
+from systems.water_surface.geometry import F64, I64, Bodies, Grid, all_of, any_of, bilinear, ranges, sum_of
 from systems.water_surface.grid_source import column_depths
-from systems.water_surface.outline import (EDGE_A, EDGE_B, MAX_BOX_VERTICES, SHARED_FACE, AddedPoints, Sections,
+from systems.water_surface.outline import (EDGE_A, EDGE_B, SHARED_FACE, AddedPoints, Sections,
                                            cross_sections, nudge, sphere_ring)
 from systems.water_surface.waves import courant_k, dents, free_degree, propagate
 
@@ -139,19 +139,19 @@ def step_water(state: WaterState, cfg: WaterSurface, grid: Grid, bodies: Bodies,
     if pending:  # the volume to keep is the water's before the drops
         _disturb(state, cfg, grid, dt, rng)
     z = state.heights
-    measured, near, n_near, levels, fallback = K.bodies_in_water(
+    measured, near, n_near, levels, fallback, local = K.bodies_in_water(
         z, state.solid, _solid_flat(state), not pending, bodies.shapes, bodies.half, bodies.radius, bodies.position,
-        bodies.rotation, grid.x0, grid.z0, grid.h, grid.y0, float(cfg.depth))
+        bodies.rotation, grid.x0, grid.z0, grid.h, grid.y0, float(cfg.depth), _CORNERS_T)
     if not pending:
         volume = measured
     if n_near < len(bodies):
-        bodies = bodies.take(near)
+        bodies, local = bodies.take(near), local[near]
     if any_of(fallback, axis=None):  # a huge window all inside bodies: its mean as numpy buffers it
         index = fallback.nonzero()[0]
         levels[index] = plane_levels(z, state.solid, bodies.take(index), grid)
     plane_y = grid.y0 + levels
     if cfg.wave_source == "outline":
-        report = _outline_step(state, cfg, grid, bodies, levels, plane_y, k, volume)
+        report = _outline_step(state, cfg, grid, bodies, local, levels, plane_y, k, volume)
     else:
         report = _grid_method_step(state, cfg, grid, bodies, levels, plane_y, k, volume)
     state.body_entities = bodies.entities.copy()
@@ -174,23 +174,18 @@ _CORNERS_T = np.ascontiguousarray(np.array([[sx, sy, sz] for sx in (-1.0, 1.0) f
                                             for sz in (-1.0, 1.0)]).T)  # (3, 8) box corners, coordinate-major
 
 
-def _outline_step(state, cfg, grid, bodies, levels, plane_y, k, volume) -> StepReport:
-    """The paper's method: added points on the outline make and reflect the waves (one kernel, kernels.py)."""
+def _outline_step(state, cfg, grid, bodies, local, levels, plane_y, k, volume) -> StepReport:
+    """The paper's method: added points on the outline make and reflect the waves (one kernel, kernels.py). The
+    boxes' corners are rotated by numpy's matmul (the bits of the numpy step: its BLAS sums with fused
+    multiply-adds)."""
     z, zp = state.heights, state.previous
     n = len(bodies)
-    is_box = bodies.shapes == BOX
-    boxes, spheres = bool(any_of(is_box, axis=None)), not bool(all_of(is_box, axis=None))
-    segments = cfg.sphere_segments
-    width = max(MAX_BOX_VERTICES if boxes else 0, segments if spheres else 0, 3)
-    if boxes:
-        corners = bodies.rotation @ (_CORNERS_T * bodies.half[:, :, None]) + bodies.position[:, :, None]
-    else:
-        corners = np.zeros((n, 3, 8))
     cached = state.section_edges is not None and state.section_edges[0] is state.polygons
     new = zp if zp.flags.c_contiguous and zp.flags.writeable else np.empty_like(z)
-    floats, ints, small, state.solid, m, n_seg, n_solid, n_unique = K.outline_step(
-        z, zp, k, state.degree, new, corners, bodies.shapes, bodies.position, bodies.radius, plane_y, levels,
-        sphere_ring(segments), EDGE_A, EDGE_B, SHARED_FACE, grid.x0, grid.z0, grid.h, width, bodies.entities,
+    floats, ints, small, state.solid, m, n_seg, n_solid, n_unique, width = K.outline_step(
+        z, zp, k, state.degree, new, np.matmul(bodies.rotation, local), bodies.shapes, bodies.position,
+        bodies.radius, plane_y, levels, sphere_ring(cfg.sphere_segments), EDGE_A, EDGE_B, SHARED_FACE, grid.x0,
+        grid.z0, grid.h, bodies.entities,
         state.point_keys, state.point_heights, state.point_previous, state.body_entities, state.polygons,
         state.polygon_counts, state.section_edges[1] if cached else _NO_TABLE, cached, cfg.outline_constant, volume,
         cfg.damping, _slots(state))
