@@ -16,6 +16,15 @@ def stable_key(text: str) -> int:
     return int.from_bytes(hashlib.blake2b(text.encode("utf-8"), digest_size=8).digest(), "little")
 
 
+def derive_generator(seed: int, system: str, entity: int = 0) -> np.random.Generator:
+    """A fresh generator for ``(system, entity)`` of the root ``seed``: the one :meth:`RandomStreams.stream` holds.
+
+    Use it directly for randomness that must be reproducible but is not simulation state (a render pass's sample
+    table, say): such a generator is not registered anywhere, so it leaves the state hash alone."""
+    seq = np.random.SeedSequence(entropy=int(seed), spawn_key=(stable_key(system), int(entity)))
+    return np.random.Generator(np.random.PCG64(seq))
+
+
 class RandomStreams:
     """The random streams of one run, all derived from one root seed."""
 
@@ -28,8 +37,7 @@ class RandomStreams:
         key = (system, int(entity))
         gen = self._streams.get(key)
         if gen is None:
-            seq = np.random.SeedSequence(entropy=self.seed, spawn_key=(stable_key(system), int(entity)))
-            gen = np.random.Generator(np.random.PCG64(seq))
+            gen = derive_generator(self.seed, system, entity)
             self._streams[key] = gen
         return gen
 

@@ -49,7 +49,7 @@ from engine.render.feature import OPAQUE, TRANSPARENT, RenderFeature, View
 from engine.render.graph import TextureDesc
 from engine.render.passes import SHADERS as ENGINE_SHADERS
 from engine.render.passes import lighting_uniforms, opaque_setup, primitive, set_uniforms
-from engine.rng import stable_key
+from engine.rng import derive_generator
 from engine.spatial import Transform
 from systems.dust_devil.simulate import marker_points, world_positions
 
@@ -99,12 +99,11 @@ BALL_BINDING = 0  # uniform block binding point of the table
 def ball_offsets(seed: int, count: int = BALL_OFFSETS) -> np.ndarray:
     """The pseudo-particle offset table (count, 4) float32: xyz independent and uniform in the unit ball (2.3),
     w = 0.  Drawn from the stream ``BALL_STREAM`` of the scene's seed, derived as the engine's streams are
-    (:class:`engine.rng.RandomStreams`) but not registered in the world: rendering leaves the state hash alone.
+    (:func:`engine.rng.derive_generator`) but not registered in the world: rendering leaves the state hash alone.
 
     A uniform point in the ball: a uniform direction (a normalised Gaussian vector) at radius u^(1/3), u uniform
     in [0, 1) (the volume inside radius ρ is ρ³)."""
-    seq = np.random.SeedSequence(entropy=int(seed), spawn_key=(stable_key(BALL_STREAM), 0))
-    rng = np.random.Generator(np.random.PCG64(seq))
+    rng = derive_generator(seed, BALL_STREAM)
     direction = rng.standard_normal((count, 3))
     radius = np.cbrt(rng.random(count))
     out = np.zeros((count, 4), np.float32)

@@ -83,3 +83,14 @@ def test_record_and_replay_reproduce_the_final_hash(tmp_path):
     cmd = [sys.executable, "-m", "engine", "run", SCENE, "--no-render", "--seed", "2", "--replay", str(rec), "--hash"]
     out = subprocess.run(cmd, capture_output=True, text=True, check=True).stdout.strip().splitlines()[-1]
     assert out == recorded
+
+
+def test_derived_generator_is_the_stream_and_stays_unregistered():
+    from engine.rng import RandomStreams, derive_generator
+
+    streams = RandomStreams(11)
+    expected = streams.stream("fx.table", 3).random(4)
+    assert np.array_equal(derive_generator(11, "fx.table", 3).random(4), expected)
+    before = streams.states()
+    derive_generator(11, "other").random(2)
+    assert streams.states() == before
