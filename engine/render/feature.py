@@ -77,6 +77,10 @@ class RenderFeature:
 
     name: str = "feature"
     phase: int = OPAQUE
+    #: True for a feature that writes every pixel the opaque passes leave at the far plane (the sky): the view's
+    #: colour target then needs no clear, only its depth (on a software rasteriser a colour clear of an HDR
+    #: target is a pass of its own).
+    fills_background: bool = False
 
     def __init__(self, renderer: Renderer) -> None:
         self.renderer = renderer

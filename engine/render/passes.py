@@ -83,6 +83,7 @@ class SkyFeature(RenderFeature):
 
     name = "sky"
     phase = SKY
+    fills_background = True  # depth test "<=" at z = w: every pixel still at the cleared depth 1.0 is drawn
     DISC_COS = 0.98  # sun.frag: below this cosine the disc adds < 1e-6
 
     def __init__(self, renderer: Renderer) -> None:

