@@ -176,7 +176,8 @@ def sun_rect(view: View, sun_dir: np.ndarray, min_cos: float) -> tuple[float, fl
 class _TerrainMesh:
     key: tuple
     chunks: TerrainChunks
-    vao: moderngl.VertexArray
+    vao: moderngl.VertexArray  # the per-pixel shade fetch (coarse chunks)
+    vao_vertex: moderngl.VertexArray  # the VERTEX_SHADE variant (full-detail chunks: Gouraud)
     vbo: moderngl.Buffer
     ibo: moderngl.Buffer
     shade: moderngl.Texture  # rgba8, one texel per grid point: sqrt(baked diffuse + ambient light × albedo / scale)
@@ -184,7 +185,7 @@ class _TerrainMesh:
     shade_scale: float = 1.0
 
     def release(self) -> None:
-        for obj in (self.vao, self.vbo, self.ibo, self.shade):
+        for obj in (self.vao, self.vao_vertex, self.vbo, self.ibo, self.shade):
             obj.release()
 
 
@@ -200,6 +201,9 @@ class TerrainFeature(RenderFeature):
         self.last_draws: dict[str, int] = {}  # view name -> draw calls issued last frame (tests, profiling)
         self.last_triangles: dict[str, int] = {}
         self.bakes = 0  # shade textures baked (tests)
+        # full-detail chunks take the baked light per vertex (Gouraud) instead of a texture fetch per pixel: on
+        # llvmpipe that fetch was ≈ 1/3 of the terrain pass (off: every chunk fetches per pixel; A/B, tests)
+        self.vertex_shade = True
 
     def extract(self, world) -> list:
         out = []
@@ -214,15 +218,15 @@ class TerrainFeature(RenderFeature):
             return mesh
         if mesh is not None:
             mesh.release()
-        prog = self._program()
         chunks = build_terrain_chunks(terrain.field)
         vbo, ibo = self.ctx.buffer(chunks.vertices.tobytes()), self.ctx.buffer(chunks.indices.tobytes())
-        vao = self.ctx.vertex_array(prog, [(vbo, "3f 3f 1f", "in_position", "in_normal", "in_skirt")], ibo,
-                                    index_element_size=4)
+        vao, vao_vertex = (self.ctx.vertex_array(self._program(vertex_shade),
+                                                 [(vbo, "3f 3f 1f", "in_position", "in_normal", "in_skirt")], ibo,
+                                                 index_element_size=4) for vertex_shade in (False, True))
         rows, cols = terrain.field.heights.shape
         shade = self.ctx.texture((cols, rows), 4)
         shade.repeat_x = shade.repeat_y = False
-        mesh = _TerrainMesh(key, chunks, vao, vbo, ibo, shade)
+        mesh = _TerrainMesh(key, chunks, vao, vao_vertex, vbo, ibo, shade)
         self._meshes[entity] = mesh
         return mesh
 
@@ -244,8 +248,8 @@ class TerrainFeature(RenderFeature):
         mesh.shade_key = key
         self.bakes += 1
 
-    def _program(self) -> moderngl.Program:
-        return self.renderer.load_program(SHADERS, "terrain")
+    def _program(self, vertex_shade: bool = False) -> moderngl.Program:
+        return self.renderer.load_program(SHADERS, "terrain", ("VERTEX_SHADE",) if vertex_shade else ())
 
     def add_passes(self, graph, view: View, data) -> None:
         if not data:
@@ -256,28 +260,35 @@ class TerrainFeature(RenderFeature):
             fbo.use()
             self.ctx.enable(moderngl.DEPTH_TEST)
             self.ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
-            prog = self._program()
-            set_uniforms(prog, **lighting_uniforms(self.renderer, view))
+            lighting = lighting_uniforms(self.renderer, view)
             draws = triangles = 0
             for entity, key, terrain, model in data:
                 mesh = self._mesh(entity, key, terrain)
                 self._bake(mesh, terrain, model)
                 levels = select_levels(mesh.chunks, model, view.view_proj, view.proj, view.camera_pos,
                                        view.height, view.ortho, terrain.config.lod_pixels)
-                ranges = draw_ranges(mesh.chunks, levels)
-                if not ranges:
-                    continue
                 mesh.shade.use(0)
-                set_uniforms(prog, model=model.T.copy(), shade=0, shade_scale=mesh.shade_scale,
-                             uv_scale=mesh.chunks.uv_scale,
-                             uv_offset=mesh.chunks.uv_offset)
-                for first, count in ranges:
-                    mesh.vao.render(moderngl.TRIANGLES, vertices=count, first=first)
-                draws += len(ranges)
-                triangles += sum(c for _, c in ranges) // 3
+                for vao, ranges, vertex_shade in self._batches(mesh, levels):
+                    set_uniforms(self._program(vertex_shade), **lighting, model=model.T.copy(), shade_map=0,
+                                 shade_scale=mesh.shade_scale, uv_scale=mesh.chunks.uv_scale,
+                                 uv_offset=mesh.chunks.uv_offset)
+                    for first, count in ranges:
+                        vao.render(moderngl.TRIANGLES, vertices=count, first=first)
+                    draws += len(ranges)
+                    triangles += sum(c for _, c in ranges) // 3
             self.last_draws[view.name], self.last_triangles[view.name] = draws, triangles
 
         graph.add_pass(f"terrain.{view.name}", opaque_setup(view), execute)
+
+    def _batches(self, mesh: _TerrainMesh, levels: np.ndarray) -> list:
+        """(vertex array, draw ranges, vertex_shade) per shader variant: full-detail chunks (level 0, whose
+        vertices are the baked grid points) shade per vertex when :attr:`vertex_shade` is on, the rest fetch the
+        baked light per pixel."""
+        if not self.vertex_shade:
+            return [(mesh.vao, draw_ranges(mesh.chunks, levels), False)]
+        batches = [(mesh.vao_vertex, draw_ranges(mesh.chunks, np.where(levels == 0, 0, -1)), True),
+                   (mesh.vao, draw_ranges(mesh.chunks, np.where(levels > 0, levels, -1)), False)]
+        return [b for b in batches if b[1]]
 
     def release(self) -> None:
         for mesh in self._meshes.values():

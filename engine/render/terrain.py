@@ -14,14 +14,18 @@ Per view and frame (numpy over chunks, no GL reads):
   into a texture at the height field's full resolution (:func:`shade_texels`; re-baked when the light or the
   colours change), so a coarse chunk keeps every bump of its lighting and only its silhouette and depth may
   move, by at most ``detail_pixels``.  In orthographic top views this lets the flat valley floor drop to a
-  handful of triangles;
+  handful of triangles.  Chunks drawn at full detail (level 0), whose vertices are the baked grid points, read
+  the baked light per vertex and interpolate the colour (Gouraud, the ``VERTEX_SHADE`` shader variant) instead
+  of fetching the texture per pixel;
 * cracks between neighbours at different levels are hidden by skirts: along every interior chunk edge a strip
   hangs from the edge vertices to copies lowered by the largest crack that edge can open (:func:`skirt_depths`),
   drawn with the edge's shading.
 
 On a software rasteriser the terrain is bound by triangle setup, which llvmpipe runs on the calling thread, so
 culling and coarser levels cut its cost nearly in proportion to the triangles skipped; the per-pixel texture
-fetch that replaces per-vertex lighting runs on the rasteriser's threads.
+fetch that replaces per-vertex lighting runs on the rasteriser's threads (in the dust devil bench's view, at
+lod_pixels 2, the terrain pass is mostly per-pixel work: 354 or 2744 triangles cost about the same, and the
+Gouraud variant on the three full-detail chunks took ≈ 1 ms of ≈ 8 off the pass under load).
 """
 
 from __future__ import annotations

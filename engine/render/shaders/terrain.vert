@@ -1,8 +1,12 @@
 #version 330
 // Height-field terrain (engine/render/terrain.py).  Diffuse and ambient light times the albedo are baked per
-// grid point into the `shade` texture at the field's full resolution, so a chunk drawn at a coarse level keeps
+// grid point into the `shade_map` texture at the field's full resolution, so a chunk drawn at a coarse level keeps
 // its lighting detail; per vertex remain the small view-dependent specular term and the fog, which vary slowly
 // (both folded into v_fogged, see terrain.frag).
+//
+// VERTEX_SHADE (chunks drawn at full detail, level 0): every vertex is a grid point, so the baked light is read
+// here, once per vertex, and the whole colour interpolated across the triangle (Gouraud) — no texture fetch
+// per pixel, the larger part of the terrain's cost on a software rasteriser.
 #include "lit.glsl"
 uniform mat4 view_proj;
 uniform mat4 model;
@@ -12,8 +16,13 @@ uniform float shade_scale;  // the shade texture's encoding scale (terrain.frag 
 in vec3 in_position;
 in vec3 in_normal;
 in float in_skirt;  // > 0 on skirt vertices: lowered by this much (hides LOD cracks), keeping the edge's shading
+#ifdef VERTEX_SHADE
+uniform sampler2D shade_map;    // rgba8: sqrt(light / shade_scale)
+out vec3 v_color;           // the fogged colour of this grid point
+#else
 out vec2 v_uv;
 out vec4 v_fogged;   // rgb: mix(specular, sky_horizon, fog); a: shade_scale · (1 - fog)
+#endif
 void main() {
     vec4 world = model * vec4(in_position, 1.0);
     vec3 n = normalize(mat3(model) * in_normal);
@@ -22,8 +31,16 @@ void main() {
     spec *= spec; spec *= spec; spec *= spec; spec *= spec;  // ^16, lit.glsl's shininess for terrain
     vec3 specular = sun_color * (spec * 0.03 * max(dot(n, sun_dir), 0.0));
     float fog = clamp(1.0 - exp(-length(camera_pos - world.xyz) * fog_density), 0.0, 1.0);
-    v_fogged = vec4(mix(specular, sky_horizon, fog), shade_scale * (1.0 - fog));
-    v_uv = in_position.xz * uv_scale + uv_offset;
+    vec4 fogged = vec4(mix(specular, sky_horizon, fog), shade_scale * (1.0 - fog));
+    vec2 uv = in_position.xz * uv_scale + uv_offset;
+#ifdef VERTEX_SHADE
+    ivec2 size = textureSize(shade_map, 0);
+    vec3 light = texelFetch(shade_map, clamp(ivec2(floor(uv * vec2(size))), ivec2(0), size - 1), 0).rgb;
+    v_color = light * light * fogged.a + fogged.rgb;
+#else
+    v_fogged = fogged;
+    v_uv = uv;
+#endif
     world.y -= in_skirt;
     gl_Position = view_proj * world;
 }
