@@ -118,6 +118,44 @@ def water_mean(field, solid):
     return (total - (0.0 + pairwise_sum(held, 0, len(held)))) / (flat.size - len(solid))
 
 
+# ------------------------------------------------------------------------------------------------ bodies
+# R − I of a unit quaternion (w, x, y, z) = 2·[[−yy − zz, xy − wz, xz + wy], [xy + wz, −xx − zz, yz − wx],
+# [xz − wy, yz + wx, −xx − yy]] (bodies._quaternion_products): per entry two products q_a·q_b with their signs.
+QUAT_TERMS = np.array([[-1, 2, 2, -1, 3, 3], [1, 1, 2, -1, 0, 3], [1, 1, 3, 1, 0, 2],
+                        [1, 1, 2, 1, 0, 3], [-1, 1, 1, -1, 3, 3], [1, 2, 3, -1, 0, 1],
+                        [1, 1, 3, -1, 0, 2], [1, 2, 3, 1, 0, 1], [-1, 1, 1, -1, 2, 2]], np.int64)
+
+
+@kernel
+def wave_bodies(table, radius, terms):
+    """The bodies that cut the water (``simulate.gather_wave_bodies``) from ``table``, the blocks (positions (B, 3),
+    quaternions (B, 4), scales (B, 3), local half extents (B, 3)) one after the other, and the local radii (B,):
+    one buffer holding half extents × |scale| (B, 3), radius × max |scale| (B,), positions (B, 3) and rotation
+    matrices (B, 3, 3).
+
+    The matrices are ``bodies.quat_to_matrix``'s bits: it multiplies the products q_a·q_b by a table of ±2 (a BLAS
+    matmul); each entry has two non-zero terms, ±2·q_a·q_b is exact, and a sum of two terms (with exact zeros)
+    is the same whatever the order or fused multiply-adds; adding the identity then turns a −0 into +0 as there.
+    """
+    n = len(radius)
+    out = np.empty(16 * n)
+    quats, scales, halves = 3 * n, 7 * n, 10 * n
+    for b in range(n):
+        s0, s1, s2 = abs(table[scales + 3 * b]), abs(table[scales + 3 * b + 1]), abs(table[scales + 3 * b + 2])
+        out[3 * b] = table[halves + 3 * b] * s0
+        out[3 * b + 1] = table[halves + 3 * b + 1] * s1
+        out[3 * b + 2] = table[halves + 3 * b + 2] * s2
+        out[3 * n + b] = radius[b] * max(max(s0, s1), s2)
+        for i in range(3):
+            out[4 * n + 3 * b + i] = table[3 * b + i]
+        q = table[quats + 4 * b:quats + 4 * b + 4]
+        for e in range(9):
+            first = (2.0 * terms[e, 0]) * (q[terms[e, 1]] * q[terms[e, 2]])
+            second = (2.0 * terms[e, 3]) * (q[terms[e, 4]] * q[terms[e, 5]])
+            out[7 * n + 9 * b + e] = (first + second) + (1.0 if e % 4 == 0 else 0.0)
+    return out
+
+
 # ----------------------------------------------------------------------------------------------- sampling
 @kernel(inline="always")
 def _bilinear(f, nx, nz, u, v):

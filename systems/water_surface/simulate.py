@@ -20,7 +20,8 @@ from engine.events import EventReader
 from engine.impacts import Impact
 from engine.spatial import Transform, cross
 from engine.world import World
-from systems.water_surface.bodies import BodyArrays, apply_impulses, integrate, pool_contacts, quat_to_matrix
+from systems.water_surface import kernels as K
+from systems.water_surface.bodies import BodyArrays, apply_impulses, integrate, pool_contacts
 from systems.water_surface.geometry import BOX, SPHERE, Bodies, Grid, bilinear, empty_bodies
 from systems.water_surface.surface import step_water
 
@@ -47,19 +48,21 @@ def water_grid(cfg: WaterSurface, state: WaterState, transform: Transform) -> Gr
 
 
 def gather_wave_bodies(world: World) -> Bodies:
-    """Every solid box or sphere Collider with a Transform (rigid bodies, scripted props): they cut the water."""
+    """Every solid box or sphere Collider with a Transform (rigid bodies, scripted props): they cut the water.
+    Their world sizes and rotation matrices come from one kernel (``kernels.wave_bodies``, the bits of
+    ``quat_to_matrix`` and of ``half_extents × |scale|``, ``radius × max |scale|``)."""
     rows = [(e, t, c) for e, (t, c) in world.query(Transform, Collider)
             if c.shape in ("box", "sphere") and not c.is_trigger]
     if not rows:
         return empty_bodies()
-    entities, transforms, colliders = zip(*rows)
-    scale = np.abs(np.array([t.scale for t in transforms]))
-    return Bodies(np.array(entities, np.int64),
-                  np.array([BOX if c.shape == "box" else SPHERE for c in colliders], np.int8),
-                  np.array([c.half_extents for c in colliders]) * scale,
-                  np.array([c.radius for c in colliders]) * scale.max(axis=1),
-                  np.array([t.position for t in transforms]),
-                  quat_to_matrix(np.array([t.rotation for t in transforms])))
+    n = len(rows)
+    table = np.concatenate([t.position for _, t, _ in rows] + [t.rotation for _, t, _ in rows]
+                           + [t.scale for _, t, _ in rows] + [c.half_extents for _, _, c in rows], dtype=np.float64)
+    out = K.wave_bodies(table, np.array([c.radius for _, _, c in rows], np.float64), K.QUAT_TERMS)
+    return Bodies(np.array([e for e, _, _ in rows], np.int64),
+                  np.array([BOX if c.shape == "box" else SPHERE for _, _, c in rows], np.int8),
+                  out[:3 * n].reshape(n, 3), out[3 * n:4 * n], out[4 * n:7 * n].reshape(n, 3),
+                  out[7 * n:].reshape(n, 3, 3))
 
 
 def _waters(world: World) -> list:
@@ -200,7 +203,7 @@ def waves_system(world: World, dt: float) -> None:
     for entity, (t, cfg, state) in waters:
         check_stability(cfg.wave_speed, cfg.spacing, dt, f"entity {entity} WaterSurface")
         rng = world.random.stream("water_surface", entity) if cfg.disturbance_rate > 0.0 else None
-        step_water(state, cfg, water_grid(cfg, state, t), bodies, dt, rng)
+        step_water(state, cfg, water_grid(cfg, state, t), bodies, dt, rng, report=False)
         collider = world.try_get(entity, Collider)
         if collider is not None and collider.heightfield is not None:
             collider.heightfield.heights[...] = state.heights

@@ -127,8 +127,10 @@ def _disturb(state: WaterState, cfg: WaterSurface, grid: Grid, dt: float, rng: n
 
 
 def step_water(state: WaterState, cfg: WaterSurface, grid: Grid, bodies: Bodies, dt: float,
-               rng: np.random.Generator | None = None) -> StepReport:
-    """Advance ``state`` by one fixed step ``dt`` with ``bodies`` at their new transforms."""
+               rng: np.random.Generator | None = None, report: bool = True) -> StepReport | None:
+    """Advance ``state`` by one fixed step ``dt`` with ``bodies`` at their new transforms. Returns what the step
+    did (:class:`StepReport`), or None without ``report`` (the systems read only the state: the outline method
+    then skips building the report's objects)."""
     k = courant_k(cfg.wave_speed, cfg.spacing, dt)
     if state.degree is None or state.degree.shape != state.heights.shape or state.coefficient_k != k:
         state.degree = free_degree(*state.heights.shape)
@@ -151,13 +153,13 @@ def step_water(state: WaterState, cfg: WaterSurface, grid: Grid, bodies: Bodies,
         levels[index] = plane_levels(z, state.solid, bodies.take(index), grid)
     plane_y = grid.y0 + levels
     if cfg.wave_source == "outline":
-        report = _outline_step(state, cfg, grid, bodies, local, levels, plane_y, k, volume)
+        result = _outline_step(state, cfg, grid, bodies, local, levels, plane_y, k, volume, report)
     else:
-        report = _grid_method_step(state, cfg, grid, bodies, levels, plane_y, k, volume)
+        result = _grid_method_step(state, cfg, grid, bodies, levels, plane_y, k, volume)
+        state.polygons, state.polygon_counts = result.sections.polygons, result.sections.counts
+        state.last_raised = result.change
     state.body_entities = bodies.entities.copy()
-    state.polygons, state.polygon_counts = report.sections.polygons, report.sections.counts
-    state.last_raised = report.change
-    return report
+    return result if report else None
 
 
 def _solid_flat(state: WaterState) -> I64:
@@ -174,7 +176,7 @@ _CORNERS_T = np.ascontiguousarray(np.array([[sx, sy, sz] for sx in (-1.0, 1.0) f
                                             for sz in (-1.0, 1.0)]).T)  # (3, 8) box corners, coordinate-major
 
 
-def _outline_step(state, cfg, grid, bodies, local, levels, plane_y, k, volume) -> StepReport:
+def _outline_step(state, cfg, grid, bodies, local, levels, plane_y, k, volume, report) -> StepReport | None:
     """The paper's method: added points on the outline make and reflect the waves (one kernel, kernels.py). The
     boxes' corners are rotated by numpy's matmul (the bits of the numpy step: its BLAS sums with fused
     multiply-adds)."""
@@ -191,23 +193,23 @@ def _outline_step(state, cfg, grid, bodies, local, levels, plane_y, k, volume) -
         cfg.damping, _slots(state))
     bw = n * width  # unpack (views): see kernels.outline_step
     uv, change = floats[:2 * m].reshape(m, 2), floats[2 * m:3 * m]
-    new_points, previous_points = floats[3 * m:4 * m], floats[4 * m:5 * m]
-    polygons, after = floats[5 * m:5 * m + 2 * bw].reshape(n, width, 2), floats[5 * m + 2 * bw:].reshape(n, width, 9)
-    keys, body = ints[:m], ints[m:2 * m]
-    at = 2 * m + 2 * n_seg
-    outline = ints[2 * m:at].reshape(n_seg, 2)
-    solid, unique = ints[at:at + n_solid], ints[at + n_solid:at + n_solid + n_unique]
-    at += n_solid + n_unique
-    counts, features = ints[at:at + n], ints[at + n:].reshape(2, n, width)
-    kind, flags = small[:m], small[m:].view(np.bool_)
-    state.solid_index = (state.solid, unique)
+    polygons = floats[5 * m:5 * m + 2 * bw].reshape(n, width, 2)
+    solid_at = 2 * m + 2 * n_seg  # ints: keys, body, segments, solid, unique, counts, features
+    unique_at = solid_at + n_solid
+    counts_at = unique_at + n_unique
+    outline, counts = ints[2 * m:solid_at].reshape(n_seg, 2), ints[counts_at:counts_at + n]
+    state.solid_index = (state.solid, ints[unique_at:counts_at])
     state.previous, state.heights = z, new
-    state.point_keys, state.point_uv, state.point_kind = keys, uv, kind
-    state.point_heights, state.point_previous, state.segments = new_points, previous_points, outline
-    state.section_edges = (polygons, after)  # next step's D'(t − 1) edges
+    state.point_keys, state.point_uv, state.point_kind = ints[:m], uv, small[:m]
+    state.point_heights, state.point_previous, state.segments = floats[3 * m:4 * m], floats[4 * m:5 * m], outline
+    state.section_edges = (polygons, floats[5 * m + 2 * bw:].reshape(n, width, 9))  # next step's D'(t − 1) edges
+    state.polygons, state.polygon_counts, state.last_raised = polygons, counts, change
+    if not report:  # the systems: nothing reads the report's objects
+        return None
+    features, flags = ints[counts_at + n:].reshape(2, n, width), small[m:].view(np.bool_)
     sections = Sections(polygons, counts, features[0], features[1])
-    points = AddedPoints(uv, kind, keys, body, outline)
-    return StepReport(bodies, plane_y, sections, points, change, flags[:m], flags[m:], solid)
+    points = AddedPoints(uv, state.point_kind, state.point_keys, ints[m:2 * m], outline)
+    return StepReport(bodies, plane_y, sections, points, change, flags[:m], flags[m:], ints[solid_at:unique_at])
 
 
 def _grid_method_step(state, cfg, grid, bodies, levels, plane_y, k, volume) -> StepReport:

@@ -153,3 +153,43 @@ def test_outline_kernels_are_the_numpy_functions(name):
     for got, want in zip(K.grid_pairs(uv, mask, grid.nx, grid.nz) + K.point_pairs(uv, grid.nx, grid.nz),
                          (g, p, w, a, b, w2)):
         np.testing.assert_array_equal(got, want)
+
+
+def test_wave_bodies_matches_numpy_bits():
+    """kernels.wave_bodies (gather_wave_bodies' sizes and matrices) == |scale| products and quat_to_matrix (the
+    BLAS matmul) bit for bit: random, axis-aligned, identity, half-turn and unnormalised quaternions, negative
+    and zero scales."""
+    from systems.water_surface.bodies import quat_to_matrix
+
+    rng = np.random.default_rng(3)
+    quats = np.concatenate([rng.standard_normal((40, 4)), np.eye(4), -np.eye(4), [[0.5, 0.5, -0.5, 0.5]],
+                            [[np.sqrt(0.5), 0.0, np.sqrt(0.5), 0.0]], [[0.0, 0.0, 0.0, 0.0]]])
+    unit = quats[:40] / np.linalg.norm(quats[:40], axis=1, keepdims=True)
+    quats = np.concatenate([quats, unit])
+    n = len(quats)
+    position, scale = rng.standard_normal((n, 3)), rng.uniform(-2.0, 2.0, (n, 3))
+    scale[::7, 1] = 0.0
+    half, radius = rng.uniform(0.0, 1.5, (n, 3)), rng.uniform(0.0, 1.0, n)
+    out = K.wave_bodies(np.concatenate([position.ravel(), quats.ravel(), scale.ravel(), half.ravel()]), radius,
+                        K.QUAT_TERMS)
+    want = np.concatenate([(half * np.abs(scale)).ravel(), radius * np.abs(scale).max(axis=1), position.ravel(),
+                           quat_to_matrix(quats).ravel()])
+    assert out.tobytes() == want.tobytes()
+    for b in range(n):  # one body at a time too (numpy's matmul takes another path for a single row)
+        one = K.wave_bodies(np.concatenate([position[b], quats[b], scale[b], half[b]]), radius[b:b + 1], K.QUAT_TERMS)
+        assert one[7:].tobytes() == quat_to_matrix(quats[b:b + 1]).ravel().tobytes()
+
+
+def test_a_step_without_report_leaves_the_same_state():
+    """step_water(..., report=False) (the systems' call) skips only the report: the state is the same bits."""
+    grid, with_report, without = _states(5, flat=False)
+    cfg = water_config(damping=0.99, outline_constant=1.3, sphere_segments=12)
+    for t in range(25):
+        bodies = _many(t)
+        assert step_water(with_report, cfg, grid, bodies, DT) is not None
+        assert step_water(without, cfg, grid, bodies, DT, report=False) is None
+        for field in (*_FIELDS, "last_raised", "solid_index", "section_edges"):
+            a, b = getattr(with_report, field), getattr(without, field)
+            for x, y in zip(a, b) if isinstance(a, tuple) else [(a, b)]:
+                np.testing.assert_array_equal(x, y, err_msg=f"{field}, step {t}")
+    assert len(without.point_uv) > 0
