@@ -285,8 +285,11 @@ def bodies_in_water(z, solid, solid_flat, need_volume, shapes, half, radius, pos
     """The start of a step (``surface.step_water``): the water's mean level (the volume to keep) when
     ``need_volume``, the bodies near the water (:func:`near_bodies`) and their plane levels S'_z − y0
     (:func:`plane_levels`), and each body's box corners in its own frame, ``signs`` (3, 8) × half extents.
-    Returns (volume, near, number near, levels of the near bodies, fallback, local corners (B, 3, 8))."""
+    Returns (volume, number near N, number of fallback windows, floats, flags): floats holds the local corners
+    (B, 3, 8) then the levels of the near bodies (N), flags (int8) the near mask (B) then the fallback mask (N)
+    (two buffers instead of four arrays: each array handed back to Python costs about a microsecond)."""
     nz, nx = z.shape
+    nb, nc = len(shapes), signs.shape[1]
     volume = water_mean(z, solid_flat) if need_volume else 0.0
     extent = extents(shapes, half, radius, rotation)
     near = near_bodies(extent, position, x0, z0, h, nx, nz, y0, depth, z)
@@ -302,12 +305,20 @@ def bodies_in_water(z, solid, solid_flat, need_volume, shapes, half, radius, pos
             size[r, 0], size[r, 1] = extent[b, 0] / h, extent[b, 2] / h
             r += 1
     levels, fallback = plane_levels(z, solid, centre, size)
-    local = np.empty((len(shapes), 3, signs.shape[1]))
-    for b in range(len(shapes)):
+    floats = np.empty(nb * 3 * nc + count)
+    for b in range(nb):
         for i in range(3):
-            for c in range(signs.shape[1]):
-                local[b, i, c] = signs[i, c] * half[b, i]
-    return volume, near, count, levels, fallback, local
+            for c in range(nc):
+                floats[(b * 3 + i) * nc + c] = signs[i, c] * half[b, i]
+    floats[nb * 3 * nc:] = levels
+    flags = np.empty(nb + count, np.int8)
+    n_fallback = 0
+    for b in range(nb):
+        flags[b] = 1 if near[b] else 0
+    for b in range(count):
+        flags[nb + b] = 1 if fallback[b] else 0
+        n_fallback += 1 if fallback[b] else 0
+    return volume, count, n_fallback, floats, flags
 
 
 # ------------------------------------------------------------------------------------- cross-sections D'

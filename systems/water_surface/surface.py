@@ -141,15 +141,18 @@ def step_water(state: WaterState, cfg: WaterSurface, grid: Grid, bodies: Bodies,
     if pending:  # the volume to keep is the water's before the drops
         _disturb(state, cfg, grid, dt, rng)
     z = state.heights
-    measured, near, n_near, levels, fallback, local = K.bodies_in_water(
+    n = len(bodies)
+    measured, n_near, n_fallback, floats, flags = K.bodies_in_water(
         z, state.solid, _solid_flat(state), not pending, bodies.shapes, bodies.half, bodies.radius, bodies.position,
         bodies.rotation, grid.x0, grid.z0, grid.h, grid.y0, float(cfg.depth), _CORNERS_T)
+    local, levels = floats[:24 * n].reshape(n, 3, 8), floats[24 * n:]
     if not pending:
         volume = measured
-    if n_near < len(bodies):
+    if n_near < n:
+        near = flags[:n].view(np.bool_)
         bodies, local = bodies.take(near), local[near]
-    if any_of(fallback, axis=None):  # a huge window all inside bodies: its mean as numpy buffers it
-        index = fallback.nonzero()[0]
+    if n_fallback:  # a huge window all inside bodies: its mean as numpy buffers it
+        index = flags[n:].nonzero()[0]
         levels[index] = plane_levels(z, state.solid, bodies.take(index), grid)
     plane_y = grid.y0 + levels
     if cfg.wave_source == "outline":
