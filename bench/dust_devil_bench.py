@@ -76,6 +76,7 @@ priority = 1
 
 
 SCATTER_STAGE = "auto"  # --scatter-stage
+PIXEL_TERRAIN = False  # --pixel-terrain
 
 
 def make_app(width: int, height: int, particles: int, cameras: str, extra: str = ""):
@@ -103,6 +104,8 @@ def bench_render(label: str, width: int, height: int, particles: int, cameras: s
     feature = next(f for f in renderer.features if f.name == "dust_devil")
     if SCATTER_STAGE == "vertex" and feature.use_scatter(1):
         feature.compute = False  # A/B: the GL 4.2 vertex-stage scatter on a context that has compute shaders
+    if PIXEL_TERRAIN:  # A/B: full-detail terrain chunks fetch the baked light per pixel too (no Gouraud variant)
+        next(f for f in renderer.features if f.name == "terrain").vertex_shade = False
     for _ in range(3):  # warm up: shader compilation, pool allocation
         app.step(1)
         app.render_frame()
@@ -163,11 +166,13 @@ def main() -> int:
     parser.add_argument("--passes", action="store_true", help="per-pass CPU times of the one-view workload")
     parser.add_argument("--scatter-stage", choices=("auto", "vertex"), default="auto",
                         help="vertex: the PBVR scatter in the vertex stage even where compute shaders run (A/B)")
+    parser.add_argument("--pixel-terrain", action="store_true",
+                        help="every terrain chunk fetches its baked light per pixel (A/B for the per-vertex variant)")
     parser.add_argument("--numpy-step", action="store_true",
                         help="also time the numpy particle step the compiled kernel replaces (A/B)")
     args = parser.parse_args()
-    global SCATTER_STAGE
-    SCATTER_STAGE = args.scatter_stage
+    global SCATTER_STAGE, PIXEL_TERRAIN
+    SCATTER_STAGE, PIXEL_TERRAIN = args.scatter_stage, args.pixel_terrain
     import os
 
     print("Dust devil (seeds/004) benchmark; load average at start "
