@@ -114,6 +114,11 @@ class GrassFieldConfig(ConfigModel):
     near_cull_cells: float = Field(1.5, ge=0.0, le=16.0,
                                    description="Culling: cells nearer than this many cell sizes are kept up to "
                                                "twice the view angle (the viewer's cell is never culled).")
+    bare_areas: list[Vec4] = Field(default_factory=list, max_length=64,
+                                   description="World-space rectangles [x_min, z_min, x_max, z_max] (metres) where "
+                                               "no grass grows, e.g. a pond or a road: every cell that overlaps "
+                                               "one is left empty at every level (geometry, cached images and the "
+                                               "band). Not in the paper; its fields are uniform.")
     face_turn_deg: float = Field(15.0, ge=1.0, le=90.0,
                                  description="Level 4: a rectangle turns to face the viewer once the view angle "
                                              "changed by this much (paper: 15°).")
@@ -167,6 +172,15 @@ class GrassFieldConfig(ConfigModel):
         if not all(0.1 <= x <= 8.0 for x in s):
             raise ValueError(f"expected four subdivision counts in [0.1, 8], got {list(s)}")
         return s
+
+    @field_validator("bare_areas")
+    @classmethod
+    def _bare_areas_ordered(cls, areas: list) -> list:
+        for i, (x0, z0, x1, z1) in enumerate(areas):
+            if not (x0 < x1 and z0 < z1):
+                raise ValueError(f"bare_areas[{i}] = [{x0}, {z0}, {x1}, {z1}] must be [x_min, z_min, x_max, z_max] "
+                                 "with x_min < x_max and z_min < z_max")
+        return areas
 
     @model_validator(mode="after")
     def _plant_budget(self) -> GrassFieldConfig:

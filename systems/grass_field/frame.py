@@ -52,7 +52,7 @@ def band_sector_content(data: FieldData, centre_cell: int, apothem: float) -> np
     """(12,) bool: which band sides have far cells behind them (empty sides are not drawn)."""
     centres = data.placed.cell_centre[:, [0, 2]]
     origin = centres[centre_cell]
-    far = band_distance(centres, origin) >= apothem
+    far = (band_distance(centres, origin) >= apothem) & ~data.bare
     if not far.any():
         return np.zeros(N_BAND_SIDES, dtype=bool)
     rel = centres[far] - origin
@@ -109,7 +109,7 @@ def plan_frame(cfg: GrassFieldConfig, data: FieldData, camera: CameraInput, orie
     if compiled and camera.ortho_pixels_per_unit is None and fwd @ fwd >= 1e-12:
         return _plan_compiled(cfg, data, camera, orientation, max_level, band_content, viewer)
     keep = cull_cells(placed.cell_centre, camera, cell_radius=data.cell_radius,
-                      near_distance=cfg.near_cull_cells * cfg.cell_size, viewer_cell=viewer)
+                      near_distance=cfg.near_cull_cells * cfg.cell_size, viewer_cell=viewer) & ~data.bare
     levels = select_levels(data.lod_points, camera, length=cfg.length_of_interest,
                            thresholds=cfg.level_thresholds, max_level=max_level,
                            merge_distance=cfg.merge_distance, viewer_cell_centre=placed.cell_centre[viewer],
@@ -176,6 +176,8 @@ def _plan_compiled(cfg: GrassFieldConfig, data: FieldData, camera: CameraInput, 
     placed = data.placed
     eye = camera.position
     levels = cell_levels(cfg, data, camera, max_level, viewer)
+    if data.bare.any():
+        levels[data.bare] = -1  # bare areas: culled like cells out of view
     ordered, cell_counts, plant_list, counts, level_prims = kernels.plants_to_draw(
         levels, placed.cell_centre, eye, placed.plants_per_cell, placed.plant_position, data.cell_sphere[0],
         data.cell_sphere[1], data.plant_sphere[0], float(data.plant_sphere[1]), frustum_planes(camera), True,

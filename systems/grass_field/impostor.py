@@ -267,7 +267,7 @@ def band_view_proj(eye: np.ndarray, apothem: float, side: int, bottom: float, to
 # ------------------------------------------------------------------------------------------ disk cache
 _IMAGE_INDEPENDENT = {"max_level", "debug_levels", "disk_cache", "cache_dir", "face_turn_deg", "image_switch_deg",
                       "blend_views", "near_cull_cells", "merge_distance", "band_resolution_scale",
-                      "band_cache_cells", "grid_x", "grid_z"}
+                      "band_cache_cells", "grid_x", "grid_z", "bare_areas"}
 
 
 def cache_key(cfg: GrassFieldConfig, state: GrassFieldState, extra: dict) -> str:

@@ -422,7 +422,8 @@ class FieldGpu:
         step = max(0.5 * self.data.plant_height, 1e-6)
         eye = np.array([centre[0], centre[1] + key[1] * step, centre[2]])
         apothem = cfg.merge_distance
-        far = np.flatnonzero(band_distance(placed.cell_centre[:, [0, 2]], centre[[0, 2]]) >= apothem)
+        far = np.flatnonzero((band_distance(placed.cell_centre[:, [0, 2]], centre[[0, 2]]) >= apothem)
+                             & ~self.data.bare)
         content = self.band_content(cell)
         bottom, top = eye[1] - 1.0, eye[1] + 1.0
         if len(far):

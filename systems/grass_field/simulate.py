@@ -38,6 +38,7 @@ class FieldData:
     cell_turn: np.ndarray  # (C,) quarter turns of each cell
     cell_sphere: tuple[np.ndarray, np.ndarray]  # (C, 3) centres and (C,) radii of spheres bounding each cell
     plant_sphere: tuple[np.ndarray, float]  # offset (3,) from a plant's base and radius of a sphere bounding it
+    bare: np.ndarray  # (C,) bool: cells overlapping a bare area (``bare_areas``), never drawn
     key: str = ""  # digest of everything above: equal keys draw the same (survives snapshot / restore copies)
 
     @property
@@ -85,7 +86,17 @@ def field_data(cfg: GrassFieldConfig, state: GrassFieldState, origin: np.ndarray
     key = _digest(cfg, state, placed)
     return FieldData(placed, meshes, cell_primitives(placed.plant_variant, cfg.plants_per_cell, meshes),
                      reach, tallest, cell_radius, lod_points, state.cell_variant.copy(),
-                     state.cell_turn.copy(), cell_sphere, plant_sphere, key)
+                     state.cell_turn.copy(), cell_sphere, plant_sphere, bare_cells(cfg, placed), key)
+
+
+def bare_cells(cfg: GrassFieldConfig, placed: PlacedField) -> np.ndarray:
+    """(C,) bool: the cells whose square overlaps one of ``cfg.bare_areas`` (world x/z rectangles)."""
+    bare = np.zeros(placed.cell_count, dtype=bool)
+    half = 0.5 * cfg.cell_size
+    x, z = placed.cell_centre[:, 0], placed.cell_centre[:, 2]
+    for x0, z0, x1, z1 in cfg.bare_areas:  # a few rectangles; each test is over all cells at once
+        bare |= (x + half > x0) & (x - half < x1) & (z + half > z0) & (z - half < z1)
+    return bare
 
 
 def _digest(cfg: GrassFieldConfig, state: GrassFieldState, placed: PlacedField) -> str:

@@ -123,3 +123,40 @@ def test_orthographic_views_draw_every_plant_of_the_kept_cells():
     assert frustum_planes(cam) is None
     for cells, plants in zip(plan.cells, plan.plants):
         assert len(plants) == len(cells) * cfg.plants_per_cell
+
+
+def test_cells_over_a_bare_area_are_never_drawn():
+    """``bare_areas`` (a pond, a road): every cell overlapping a rectangle is culled at every level, in the compiled
+    and the numpy plan alike, the viewer's own cell included, and the band leaves those cells out."""
+    from systems.grass_field.frame import band_sector_content
+
+    area = (-120.0, -60.0, 90.0, 140.0)
+    cfg = paper_config(grid_x=40, grid_z=40, bare_areas=[list(area)])
+    _, data = make_field(cfg)
+    x, z = data.placed.cell_centre[:, 0], data.placed.cell_centre[:, 2]
+    half = 0.5 * cfg.cell_size
+    overlap = (x + half > area[0]) & (x - half < area[2]) & (z + half > area[1]) & (z - half < area[3])
+    assert np.array_equal(data.bare, overlap) and 4 <= overlap.sum() < 20
+    plain = make_field(paper_config(grid_x=40, grid_z=40))[1]
+    for position, yaw in [((0.0, 30.0, 40.0), 20.0), ((-900.0, 30.0, 0.0), 0.0), ((300.0, 40.0, -500.0), 120.0)]:
+        cam = level_camera(position, yaw, pitch_deg=-10.0)
+        for compiled in (True, False):
+            plan = plan_frame(cfg, data, cam, ImpostorOrientation(data.cell_count), compiled=compiled)
+            reference = plan_frame(cfg, plain, cam, ImpostorOrientation(plain.cell_count), compiled=compiled)
+            assert (plan.levels[overlap] == -1).all()
+            assert np.array_equal(plan.levels[~overlap], reference.levels[~overlap])
+            assert (reference.levels[overlap] >= 0).any() or position[0] < -500.0  # the area was in view
+            for cells in plan.cells:
+                assert not overlap[cells].any()
+            assert not overlap[plan.impostor_cells].any()
+    far_from = int(data.placed.cell_of(np.array([-900.0, 0.0])))
+    content, plain_content = (band_sector_content(d, far_from, cfg.merge_distance) for d in (data, plain))
+    assert (content <= plain_content).all()
+
+
+def test_bare_areas_must_be_ordered():
+    import pytest
+    from pydantic import ValidationError
+
+    with pytest.raises(ValidationError, match=r"bare_areas\[1\].*x_min < x_max"):
+        paper_config(bare_areas=[[0.0, 0.0, 1.0, 1.0], [5.0, 0.0, 2.0, 1.0]])
