@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from engine.heightfield import HeightField
+from engine.jit import kernel
 from engine.spatial import Transform, quat_conjugate, quat_rotate
 
 __all__ = ["Collider", "ColliderShape", "RayHits"]
@@ -93,6 +94,8 @@ class Collider:
 
     def signed_distance(self, points: ArrayLike, transform: Transform) -> F64:
         """Signed distance (N,) from world points to the surface, negative inside (vertical for height fields)."""
+        if self.shape == "box":
+            return self._box_kernel_query(_points(points, "points"), transform)[0]
         return self._local_distance(self._to_local(_points(points, "points"), transform), transform)[0]
 
     def query(self, points: ArrayLike, transform: Transform) -> tuple[F64, F64]:
@@ -101,6 +104,13 @@ class Collider:
         The normal is that of the nearest surface point (box, sphere, plane) or of the height field at the
         point's (x, z); it is returned for every point, penetrating or not.
         """
+        if self.shape == "box":
+            _, depth, normal = self._box_kernel_query(_points(points, "points"), transform)
+            return depth, normal
+        return self._query_numpy(_points(points, "points"), transform)
+
+    def _query_numpy(self, points: F64, transform: Transform) -> tuple[F64, F64]:
+        """:meth:`query` in numpy, every shape (the reference of the box kernel)."""
         distance, normal = self._local_distance(self._to_local(_points(points, "points"), transform), transform)
         return np.maximum(0.0, -distance), quat_rotate(transform.rotation, normal)
 
@@ -117,6 +127,13 @@ class Collider:
         origins, dirs = _points(origins, "origins"), _points(dirs, "dirs")
         if origins.shape != dirs.shape:
             raise ValueError(f"origins {origins.shape} and dirs {dirs.shape} must have the same shape")
+        if self.shape == "box":
+            return _box_ray_cast_kernel(
+                np.ascontiguousarray(origins), np.ascontiguousarray(dirs), *self._box_frame(transform), float(max_t))
+        return self._ray_cast_numpy(origins, dirs, transform, max_t)
+
+    def _ray_cast_numpy(self, origins: F64, dirs: F64, transform: Transform, max_t: float = np.inf) -> RayHits:
+        """:meth:`ray_cast` in numpy, every shape (the reference of the box kernel)."""
         inverse = quat_conjugate(transform.rotation)
         o = quat_rotate(inverse, origins - transform.position)
         d = quat_rotate(inverse, dirs)
@@ -143,6 +160,16 @@ class Collider:
 
     def _box_half_extents(self, transform: Transform) -> F64:
         return self.half_extents * np.abs(transform.scale)
+
+    def _box_frame(self, transform: Transform) -> tuple[F64, F64, F64, F64]:
+        """The box kernels' frame arguments: position, rotation q, its conjugate and the half extents."""
+        q = np.ascontiguousarray(transform.rotation, dtype=np.float64)
+        return (np.ascontiguousarray(transform.position, dtype=np.float64), q, quat_conjugate(q),
+                self._box_half_extents(transform))
+
+    def _box_kernel_query(self, points: F64, transform: Transform) -> tuple[F64, F64, F64]:
+        """Box signed distance, penetration depth and world normal (the compiled :meth:`query`)."""
+        return _box_query_kernel(np.ascontiguousarray(points), *self._box_frame(transform))
 
     def _sphere_radius(self, transform: Transform) -> float:
         return self.radius * float(np.max(np.abs(transform.scale)))
@@ -325,3 +352,129 @@ def _refine_crossing(f, a: F64, b: F64, fa: F64, fb: F64) -> F64:
         a[live] = np.where(zero, m, a[live])
         live = live[(b[live] - a[live]) > _HEIGHTFIELD_TOLERANCE]
     return 0.5 * (a + b)
+
+
+# ------------------------------------------------------------------------------------------- box kernels
+# One pass over the rows, the same float operations in the same order as the numpy code above (quat_rotate,
+# _box_distance, _unit, _ray_box and ray_cast's inside test), so the results are the same bits; numpy's
+# maximum/minimum/clip semantics (NaN propagates; of equal values, e.g. -0.0 and 0.0, the second operand) are
+# kept by _max and _min.
+
+
+@kernel(inline="always")
+def _max(a: float, b: float) -> float:
+    """np.maximum(a, b): NaN propagates; of equal values (±0) the second."""
+    return a if (a > b or a != a) else b
+
+
+@kernel(inline="always")
+def _min(a: float, b: float) -> float:
+    """np.minimum(a, b): NaN propagates; of equal values (±0) the second."""
+    return a if (a < b or a != a) else b
+
+
+@kernel(inline="always")
+def _first_max_axis(a: float, b: float, c: float) -> int:
+    """_first_max for one row: argmax of (a, b, c), the first of equal maxima."""
+    axis = 1 if b > a else 0
+    if c > _max(a, b):
+        axis = 2
+    return axis
+
+
+@kernel(inline="always")
+def _rotate(w: float, ux: float, uy: float, uz: float, vx: float, vy: float, vz: float
+            ) -> tuple[float, float, float]:
+    """quat_rotate for one vector: v' = v + 2u×(u×v + w·v), u = (x, y, z), with cross's products in its order."""
+    sx = (uy * vz - uz * vy) + w * vx
+    sy = (uz * vx - ux * vz) + w * vy
+    sz = (ux * vy - uy * vx) + w * vz
+    return vx + 2.0 * (uy * sz - uz * sy), vy + 2.0 * (uz * sx - ux * sz), vz + 2.0 * (ux * sy - uy * sx)
+
+
+@kernel(inline="always")
+def _box_row(px: float, py: float, pz: float, hx: float, hy: float, hz: float
+             ) -> tuple[float, float, float, float]:
+    """Collider._box_distance for one local point: the exact box SDF (Quilez) and the outward unit normal."""
+    q0, q1, q2 = abs(px) - hx, abs(py) - hy, abs(pz) - hz
+    m0, m1, m2 = _max(q0, 0.0), _max(q1, 0.0), _max(q2, 0.0)
+    outside = np.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
+    distance = outside + _min(_max(_max(q0, q1), q2), 0.0)
+    if outside > 0.0:  # from the nearest box point clamp(p, -h, h) to p, as _unit does it
+        vx = px - _min(_max(px, -hx), hx)
+        vy = py - _min(_max(py, -hy), hy)
+        vz = pz - _min(_max(pz, -hz), hz)
+        norm = np.sqrt(vx * vx + vy * vy + vz * vz)
+        if norm > 0.0:
+            return distance, vx / norm, vy / norm, vz / norm
+        return distance, 0.0, 1.0, 0.0
+    axis = _first_max_axis(q0, q1, q2)
+    if axis == 0:
+        return distance, (1.0 if px >= 0.0 else -1.0), 0.0, 0.0
+    if axis == 1:
+        return distance, 0.0, (1.0 if py >= 0.0 else -1.0), 0.0
+    return distance, 0.0, 0.0, (1.0 if pz >= 0.0 else -1.0)
+
+
+@kernel
+def _box_query_kernel(points: F64, position: F64, q: F64, inverse: F64, h: F64) -> tuple[F64, F64, F64]:
+    """Box signed distance d (N,), penetration depth z = max(0, -d) (eq. 3.2 of the energy wave's thesis) and
+    outward world normal (N, 3) of world points: Collider.query / signed_distance for a box in one pass."""
+    n = points.shape[0]
+    distance, depth, normal = np.empty(n), np.empty(n), np.empty((n, 3))
+    for i in range(n):  # compiled loop over points
+        lx, ly, lz = _rotate(inverse[0], inverse[1], inverse[2], inverse[3], points[i, 0] - position[0],
+                             points[i, 1] - position[1], points[i, 2] - position[2])
+        d, nx, ny, nz = _box_row(lx, ly, lz, h[0], h[1], h[2])
+        distance[i] = d
+        depth[i] = _max(0.0, -d)
+        normal[i, 0], normal[i, 1], normal[i, 2] = _rotate(q[0], q[1], q[2], q[3], nx, ny, nz)
+    return distance, depth, normal
+
+
+@kernel(inline="always")
+def _slab(o: float, d: float, h: float) -> tuple[float, float]:
+    """One axis of the slab method (Kay & Kajiya 1986): the ray's entry and exit t of |x| <= h."""
+    if d == 0.0:  # parallel: inside the slab for every t or never
+        if abs(o) <= h:
+            return -np.inf, np.inf
+        return np.inf, -np.inf
+    inv = 1.0 / d
+    t1, t2 = (-h - o) * inv, (h - o) * inv
+    return _min(t1, t2), _max(t1, t2)
+
+
+@kernel
+def _box_ray_cast_kernel(origins: F64, dirs: F64, position: F64, q: F64, inverse: F64, h: F64, max_t: float
+                         ) -> tuple[NDArray[np.bool_], F64, F64]:
+    """Collider.ray_cast for a box in one pass: slab method (Kay & Kajiya 1986) in the box frame, a ray starting
+    inside (signed distance < 0) hits at t = 0 with the nearest face's normal; misses have t = inf, normal 0."""
+    n = origins.shape[0]
+    hit, t, normal = np.empty(n, dtype=np.bool_), np.empty(n), np.empty((n, 3))
+    for i in range(n):  # compiled loop over rays
+        ox, oy, oz = _rotate(inverse[0], inverse[1], inverse[2], inverse[3], origins[i, 0] - position[0],
+                             origins[i, 1] - position[1], origins[i, 2] - position[2])
+        dx, dy, dz = _rotate(inverse[0], inverse[1], inverse[2], inverse[3], dirs[i, 0], dirs[i, 1], dirs[i, 2])
+        a0, b0 = _slab(ox, dx, h[0])
+        a1, b1 = _slab(oy, dy, h[1])
+        a2, b2 = _slab(oz, dz, h[2])
+        t_near = _max(_max(a0, a1), a2)
+        t_far = _min(_min(b0, b1), b2)
+        distance, nx, ny, nz = _box_row(ox, oy, oz, h[0], h[1], h[2])
+        if distance < 0.0:
+            hit[i], t[i] = True, 0.0
+        elif t_near <= t_far and t_near >= 0.0 and t_near <= max_t:
+            hit[i], t[i] = True, t_near
+            axis = _first_max_axis(a0, a1, a2)
+            nx = ny = nz = 0.0
+            if axis == 0:
+                nx = -1.0 if dx > 0.0 else 1.0
+            elif axis == 1:
+                ny = -1.0 if dy > 0.0 else 1.0
+            else:
+                nz = -1.0 if dz > 0.0 else 1.0
+        else:
+            hit[i], t[i] = False, np.inf
+            nx = ny = nz = 0.0
+        normal[i, 0], normal[i, 1], normal[i, 2] = _rotate(q[0], q[1], q[2], q[3], nx, ny, nz)
+    return hit, t, normal

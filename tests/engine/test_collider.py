@@ -200,3 +200,116 @@ def test_first_max_is_argmax_over_three_columns_ties_included():
     q[:10] = [[1, 1, 1], [0, 1, 1], [1, 0, 1], [1, 1, 0], [-np.inf, -np.inf, -np.inf], [np.inf, 0, np.inf],
               [-1, -np.inf, -1], [0, 0, 1], [2, 2, 1], [-0.0, 0.0, -0.0]]
     assert np.array_equal(_first_max(q[:, 0], q[:, 1], q[:, 2]), np.argmax(q, axis=-1))
+
+
+# ----------------------------------------------------------------------------- box kernels == numpy reference
+def _same_bits(a, b):
+    a, b = np.asarray(a), np.asarray(b)
+    assert a.shape == b.shape and a.dtype == b.dtype
+    if a.dtype == np.bool_:
+        np.testing.assert_array_equal(a, b)
+    else:  # bit patterns: tells -0.0 from 0.0 and compares NaNs
+        np.testing.assert_array_equal(a.view(np.int64), b.view(np.int64))
+
+
+def _box_cases():
+    """Random boxes and transforms (rotated, scaled incl. a flat and a negative axis) with the edge cases."""
+    rng = np.random.default_rng(7)
+    cases = [
+        (Collider(shape="box", half_extents=[1.0, 2.0, 3.0]), Transform()),
+        (Collider(shape="box", half_extents=[1.0, 2.0, 3.0]), Transform(position=[10.0, -1.0, 0.5])),
+        (Collider(shape="box", half_extents=[0.5, 0.0, 0.25]),
+         Transform(position=[0.2, 0.3, -0.4], rotation=quat_from_euler(0.3, -1.1, 2.0), scale=[2.0, 1.0, -3.0])),
+        (Collider(shape="box", half_extents=[1.0, 1.0, 1.0]),
+         Transform(rotation=quat_from_axis_angle([0, 1, 0], np.pi / 4))),
+    ]
+    for _ in range(3):
+        q = rng.standard_normal(4)
+        cases.append((Collider(shape="box", half_extents=rng.uniform(0.1, 3.0, 3)),
+                      Transform(position=rng.uniform(-5, 5, 3), rotation=q / np.linalg.norm(q),
+                                scale=rng.uniform(-2, 2, 3))))
+    return cases
+
+
+def _edge_points(box, transform, rng, n=4000):
+    """World points: random, on faces/edges/corners, at the centre, on the axes with ±0 and far away."""
+    h = box.half_extents * np.abs(transform.scale)
+    local = rng.uniform(-2.0, 2.0, (n, 3)) * np.maximum(h, 0.5)
+    signs = rng.choice([-1.0, 1.0], (n, 3))
+    snap = rng.random((n, 3)) < 0.3  # about a third of the coordinates exactly on a face plane
+    local = np.where(snap, signs * h, local)
+    zero = rng.random((n, 3)) < 0.1
+    local = np.where(zero, signs * 0.0, local)  # +0.0 and -0.0
+    local[:8] = [[0, 0, 0], [-0.0, -0.0, -0.0], h, -h, [h[0], 0, 0], [0, -h[1], 0], [0, 0, h[2]], 3 * h + 1]
+    world = transform.position + _rotate_np(transform.rotation, local)
+    world[-4:] = [[0.0, 0.0, 0.0], [-0.0, 0.0, -0.0], [1e6, -1e6, 1e6], [1e-300, -1e-300, 0.0]]
+    world = np.concatenate([world, local])  # also unrotated points, exactly on axis-aligned faces
+    return world
+
+
+def _rotate_np(q, v):
+    from engine.spatial import quat_rotate
+
+    return quat_rotate(q, v)
+
+
+def test_box_query_kernel_matches_numpy_bit_for_bit():
+    rng = np.random.default_rng(11)
+    for box, transform in _box_cases():
+        points = _edge_points(box, transform, rng)
+        depth, normal = box.query(points, transform)
+        ref_depth, ref_normal = box._query_numpy(points, transform)
+        _same_bits(depth, ref_depth)
+        _same_bits(normal, ref_normal)
+        ref_distance = box._local_distance(box._to_local(points, transform), transform)[0]
+        _same_bits(box.signed_distance(points, transform), ref_distance)
+        assert np.all(np.isfinite(normal))
+    box = Collider(shape="box")
+    empty = box.query(np.zeros((0, 3)), Transform())
+    assert empty[0].shape == (0,) and empty[1].shape == (0, 3)
+
+
+def test_box_ray_cast_kernel_matches_numpy_bit_for_bit():
+    rng = np.random.default_rng(12)
+    for box, transform in _box_cases():
+        origins = _edge_points(box, transform, rng)
+        n = len(origins)
+        # directions: random, towards the centre, axis-parallel (zeros in the box frame and in the world frame),
+        # zero vectors (NaN-free), tiny and huge
+        dirs = rng.standard_normal((n, 3))
+        dirs[rng.random(n) < 0.25] *= 1e-3
+        towards = rng.random(n) < 0.3
+        dirs[towards] = transform.position - origins[towards]
+        axis_rows = rng.random(n) < 0.3
+        local_axis = np.zeros((n, 3))
+        local_axis[np.arange(n), rng.integers(0, 3, n)] = rng.choice([-3.0, 3.0], n)
+        dirs[axis_rows] = _rotate_np(transform.rotation, local_axis[axis_rows])
+        dirs[rng.random(n) < 0.2] *= rng.choice([0.0, -0.0, 1.0], (1, 3))  # world-axis zeros
+        dirs[:5] = [[0, 0, 0], [-0.0, -0.0, -0.0], [1e-310, 0, 0], [0, 1e300, 0], [1, 1, 1]]
+        for max_t in (np.inf, 1.0, 0.0, 2.5):
+            hit, t, normal = box.ray_cast(origins, dirs, transform, max_t=max_t)
+            with np.errstate(over="ignore"):  # 1 / 1e-310 in the numpy reference
+                ref = box._ray_cast_numpy(origins, dirs, transform, max_t=max_t)
+            _same_bits(hit, ref[0])
+            _same_bits(t, ref[1])
+            _same_bits(normal, ref[2])
+            assert not np.isnan(t).any() and not np.isnan(normal).any()
+            assert hit.any() and (~hit).any()
+        # a zero direction hits only from inside (t = 0)
+        zero_hit, zero_t, _ = box.ray_cast(origins, np.zeros_like(origins), transform)
+        inside = box.signed_distance(origins, transform) < 0.0
+        np.testing.assert_array_equal(zero_hit, inside)
+        assert np.all(zero_t[inside] == 0.0) and np.all(np.isinf(zero_t[~inside]))
+
+
+def test_box_kernels_accept_non_contiguous_and_list_input():
+    box = Collider(shape="box", half_extents=[1.0, 2.0, 0.5])
+    transform = Transform(position=[0.5, 0.0, 0.0], rotation=quat_from_euler(0.2, 0.4, 0.1))
+    rng = np.random.default_rng(3)
+    block = rng.uniform(-3, 3, (50, 6))
+    origins, dirs = block[:, :3], block[:, 3:]  # strided views
+    assert not origins.flags.c_contiguous
+    for got, ref in zip(box.ray_cast(origins, dirs, transform), box._ray_cast_numpy(origins, dirs, transform)):
+        _same_bits(got, ref)
+    for got, ref in zip(box.query(origins.tolist(), transform), box._query_numpy(origins, transform)):
+        _same_bits(got, ref)
