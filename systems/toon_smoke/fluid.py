@@ -22,7 +22,9 @@ from systems.toon_smoke.grid import F32, Geometry, trilinear_points
 
 __all__ = [
     "advect_scalars",
+    "advect_scalars_numpy",
     "advect_velocity",
+    "advect_velocity_numpy",
     "cell_velocity",
     "diffuse",
     "divergence",
@@ -64,6 +66,19 @@ def divergence(u: F32, v: F32, w: F32, h: float) -> F32:
 
 
 def advect_velocity(geo: Geometry, u: F32, v: F32, w: F32, dt: float) -> tuple[F32, F32, F32]:
+    """Semi-Lagrangian self-advection (Stam 1999 §2.3): u_new(x) = u(x − Δt·u(x)), back-traces clamped to the box,
+    as one compiled pass per component (:func:`systems.toon_smoke.kernels.advect_velocity_kernel`); the same bits
+    as :func:`advect_velocity_numpy`, its reference in the tests."""
+    from systems.toon_smoke.kernels import advect_velocity_kernel
+
+    return advect_velocity_kernel(_f32c(u), _f32c(v), _f32c(w), np.float32(dt / geo.h))
+
+
+def _f32c(a: F32) -> F32:
+    return np.ascontiguousarray(a, np.float32)
+
+
+def advect_velocity_numpy(geo: Geometry, u: F32, v: F32, w: F32, dt: float) -> tuple[F32, F32, F32]:
     """Semi-Lagrangian self-advection (Stam 1999 §2.3): u_new(x) = u(x − Δt·u(x)), back-traces clamped to the box.
 
     Each component is traced from its own faces; the two other components at a face are the 4-face averages.
@@ -101,6 +116,23 @@ def _clamped_back_trace(base: F32, velocity: F32, s: np.float32) -> F32:
 
 
 def advect_scalars(geo: Geometry, fields: list[F32], u: F32, v: F32, w: F32, dt: float) -> list[F32]:
+    """Semi-Lagrangian advection of cell-centred scalars by the MAC velocity (Stam 1999 §2.3), two fields per
+    compiled pass (:func:`systems.toon_smoke.kernels.advect_scalars_kernel`); the same bits as
+    :func:`advect_scalars_numpy`, its reference in the tests."""
+    from systems.toon_smoke.kernels import advect_scalars_kernel
+
+    s = np.float32(dt / geo.h)
+    u, v, w = _f32c(u), _f32c(v), _f32c(w)
+    out: list[F32] = []
+    for first in range(0, len(fields), 2):  # loop over the fields, two at a time
+        pair = fields[first:first + 2]
+        a = _f32c(pair[0])
+        b = _f32c(pair[1]) if len(pair) == 2 else a
+        out.extend(advect_scalars_kernel(a, b, u, v, w, s)[:len(pair)])
+    return out
+
+
+def advect_scalars_numpy(geo: Geometry, fields: list[F32], u: F32, v: F32, w: F32, dt: float) -> list[F32]:
     """Semi-Lagrangian advection of cell-centred scalars (density, temperature) by the MAC velocity.
 
     Trilinear interpolation is a convex combination, so the result stays within the old field's range (density

@@ -93,3 +93,161 @@ def splat_blobs_kernel(target, centres, directions, along, across, amplitude):  
             for kk in range(nz):
                 target[i, j, kk] += box[i, j, kk]
     return count
+
+
+# --- Semi-Lagrangian advection (Stam 1999 §2.3; seeds/002 §3.1) -------------------------------------------------
+#
+# The numpy reference (:func:`systems.toon_smoke.fluid.advect_velocity_numpy` and ``advect_scalars_numpy``) builds
+# the velocity at every sample, the back-traced points, the clamped coordinates, the eight corner indices and the
+# eight gathered corner values as whole arrays: some forty calls and as many temporaries per step on a 32³ grid.
+# The kernels below do the same float32 operations, in the same order, per sample in one pass, so the results have
+# the same bits:
+#   cell velocity    ½·(a + b) (the sum rounded, then halved),
+#   onto a face      (c_lo + c_hi)·½, the border faces copying their cell,
+#   back-trace       p = (x − (u·s)) − stagger,
+#   clamp            c = min(max(p, 0), n − 1), i = min(int(c), n − 2), f = c − i,
+#   trilinear blend  lerps along z, then y, then x: lo + (hi − lo)·f.
+
+
+@kernel
+def _cell_velocities(u, v, w):  # pragma: no cover
+    """Velocity at cell centres, the mean of each cell's two faces per axis (``fluid.cell_velocity``)."""
+    nx, ny, nz = u.shape[0] - 1, v.shape[1] - 1, w.shape[2] - 1
+    cu = np.empty((nx, ny, nz), np.float32)
+    cv = np.empty((nx, ny, nz), np.float32)
+    cw = np.empty((nx, ny, nz), np.float32)
+    half = np.float32(0.5)
+    for i in range(nx):
+        for j in range(ny):
+            for k in range(nz):
+                cu[i, j, k] = half * (u[i, j, k] + u[i + 1, j, k])
+                cv[i, j, k] = half * (v[i, j, k] + v[i, j + 1, k])
+                cw[i, j, k] = half * (w[i, j, k] + w[i, j, k + 1])
+    return cu, cv, cw
+
+
+@kernel(inline="always")
+def _on_face(c, axis, i, j, k):  # pragma: no cover
+    """A cell field at face (i, j, k) normal to ``axis``: mean of the two cells, the border faces copy their cell
+    (``fluid._to_faces``)."""
+    n = c.shape[axis]
+    if axis == 0:
+        if i == 0:
+            return c[0, j, k]
+        if i == n:
+            return c[n - 1, j, k]
+        return (c[i - 1, j, k] + c[i, j, k]) * np.float32(0.5)
+    if axis == 1:
+        if j == 0:
+            return c[i, 0, k]
+        if j == n:
+            return c[i, n - 1, k]
+        return (c[i, j - 1, k] + c[i, j, k]) * np.float32(0.5)
+    if k == 0:
+        return c[i, j, 0]
+    if k == n:
+        return c[i, j, n - 1]
+    return (c[i, j, k - 1] + c[i, j, k]) * np.float32(0.5)
+
+
+@kernel(inline="always")
+def _clamp_axis(p, n):  # pragma: no cover
+    """Clamped coordinate along one axis of n samples: (base index, fraction), as ``grid.trilinear_points``."""
+    c = p
+    if c <= np.float32(0.0):  # np.maximum(p, 0): −0 becomes +0, NaN stays NaN
+        c = np.float32(0.0)
+    top = np.float32(n - 1)
+    if c > top:
+        c = top
+    i = int(c)
+    if i > n - 2:
+        i = n - 2
+    return i, c - np.float32(i)
+
+
+@kernel(inline="always")
+def _trilinear(values, px, py, pz):  # pragma: no cover
+    """Trilinear sample of ``values`` at index-space point (px, py, pz), clamped (``grid.Trilinear.gather``)."""
+    nx, ny, nz = values.shape
+    i, fx = _clamp_axis(px, nx)
+    j, fy = _clamp_axis(py, ny)
+    k, fz = _clamp_axis(pz, nz)
+    return _blend(values, i, j, k, fx, fy, fz)
+
+
+@kernel(inline="always")
+def _blend(values, i, j, k, fx, fy, fz):  # pragma: no cover
+    """Lerp the eight corners from (i, j, k) along z, then y, then x (``grid._blend_in_place``)."""
+    v000, v001 = values[i, j, k], values[i, j, k + 1]
+    v010, v011 = values[i, j + 1, k], values[i, j + 1, k + 1]
+    v100, v101 = values[i + 1, j, k], values[i + 1, j, k + 1]
+    v110, v111 = values[i + 1, j + 1, k], values[i + 1, j + 1, k + 1]
+    c00 = (v001 - v000) * fz + v000
+    c01 = (v011 - v010) * fz + v010
+    c10 = (v101 - v100) * fz + v100
+    c11 = (v111 - v110) * fz + v110
+    c0 = (c01 - c00) * fy + c00
+    c1 = (c11 - c10) * fy + c10
+    return (c1 - c0) * fx + c0
+
+
+@kernel
+def _advect_component(values, axis, own, cu, cv, cw, s):  # pragma: no cover
+    """One MAC component traced from its own faces: u_new(x) = u(x − s·u(x)) (Stam 1999 §2.3, ``s`` = Δt/h),
+    the other two components at a face being the face average of their cell values."""
+    n0, n1, n2 = values.shape
+    out = np.empty_like(values)
+    half = np.float32(0.5)
+    zero = np.float32(0.0)
+    sx = half if axis != 0 else zero  # the component's stagger, subtracted from the back-traced point
+    sy = half if axis != 1 else zero
+    sz = half if axis != 2 else zero
+    for i in range(n0):
+        bx = np.float32(i) if axis == 0 else np.float32(i + 0.5)
+        for j in range(n1):
+            by = np.float32(j) if axis == 1 else np.float32(j + 0.5)
+            for k in range(n2):
+                bz = np.float32(k) if axis == 2 else np.float32(k + 0.5)
+                vx = own[i, j, k] if axis == 0 else _on_face(cu, axis, i, j, k)
+                vy = own[i, j, k] if axis == 1 else _on_face(cv, axis, i, j, k)
+                vz = own[i, j, k] if axis == 2 else _on_face(cw, axis, i, j, k)
+                px = (bx - vx * s) - sx
+                py = (by - vy * s) - sy
+                pz = (bz - vz * s) - sz
+                out[i, j, k] = _trilinear(values, px, py, pz)
+    return out
+
+
+@kernel
+def advect_velocity_kernel(u, v, w, s):  # pragma: no cover
+    """Semi-Lagrangian self-advection of a MAC velocity (Stam 1999 §2.3; seeds/002 §3.1), back-traces clamped to
+    the box; ``s`` = Δt/h (float32).  Returns new (u, v, w) arrays."""
+    cu, cv, cw = _cell_velocities(u, v, w)
+    return (_advect_component(u, 0, u, cu, cv, cw, s), _advect_component(v, 1, v, cu, cv, cw, s),
+            _advect_component(w, 2, w, cu, cv, cw, s))
+
+
+@kernel
+def advect_scalars_kernel(a, b, u, v, w, s):  # pragma: no cover
+    """Semi-Lagrangian advection of two cell-centred scalars (density, temperature) by a MAC velocity (Stam 1999
+    §2.3): each cell reads both fields at x − s·u(x), u being the cell-centre velocity.  Returns two new arrays."""
+    cu, cv, cw = _cell_velocities(u, v, w)
+    nx, ny, nz = a.shape
+    out_a = np.empty_like(a)
+    out_b = np.empty_like(b)
+    half = np.float32(0.5)
+    for i in range(nx):
+        bx = np.float32(i + 0.5)
+        for j in range(ny):
+            by = np.float32(j + 0.5)
+            for k in range(nz):
+                bz = np.float32(k + 0.5)
+                px = (bx - cu[i, j, k] * s) - half
+                py = (by - cv[i, j, k] * s) - half
+                pz = (bz - cw[i, j, k] * s) - half
+                ci, fx = _clamp_axis(px, nx)  # one clamp for both fields (they share the grid)
+                cj, fy = _clamp_axis(py, ny)
+                ck, fz = _clamp_axis(pz, nz)
+                out_a[i, j, k] = _blend(a, ci, cj, ck, fx, fy, fz)
+                out_b[i, j, k] = _blend(b, ci, cj, ck, fx, fy, fz)
+    return out_a, out_b
