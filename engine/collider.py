@@ -358,7 +358,9 @@ def _refine_crossing(f, a: F64, b: F64, fa: F64, fb: F64) -> F64:
 # One pass over the rows, the same float operations in the same order as the numpy code above (quat_rotate,
 # _box_distance, _unit, _ray_box and ray_cast's inside test), so the results are the same bits; numpy's
 # maximum/minimum/clip semantics (NaN propagates; of equal values, e.g. -0.0 and 0.0, the second operand) are
-# kept by _max and _min.
+# kept by _max and _min. Measured (thread_time, one process, numpy and kernel alternated): 100k rows of a rotated
+# box, ray_cast 55.8 -> 5.4 ms and query 34.9 -> 4.8 ms median; in the energy wave's 105k-particle step
+# (~4.5k rows cast/queried) the collider calls 2.0-2.2 -> 0.22 ms median.
 
 
 @kernel(inline="always")
