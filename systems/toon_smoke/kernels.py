@@ -251,3 +251,57 @@ def advect_scalars_kernel(a, b, u, v, w, s):  # pragma: no cover
                 out_a[i, j, k] = _blend(a, ci, cj, ck, fx, fy, fz)
                 out_b[i, j, k] = _blend(b, ci, cj, ck, fx, fy, fz)
     return out_a, out_b
+
+
+# --- Multigrid smoother and residual of the pressure solve (McAdams et al. 2010; seeds/002 §3.1) -----------------
+#
+# The numpy reference (:func:`systems.toon_smoke.poisson._half_sweep_numpy`, ``_residual_numpy``) works on the
+# padded flat layout of a level (:class:`systems.toon_smoke.poisson.Level`): six shifted views summed, then a few
+# whole-vector products, eight to fourteen calls per half sweep.  These kernels do the same float32 operations in
+# the same order per cell, in two passes where the numpy code reads the old iterate everywhere (the neighbour sums
+# first, then the blend), so the results have the same bits.
+
+
+@kernel
+def _neighbour_sums(x, sx, sy, coefficients, weighted, start, out):  # pragma: no cover
+    """Σ_f A_f φ_nb(f) over the span into ``out``, taken −x, +x, −y, +y, −z, +z left to right (neighbours at
+    ∓ sx, ∓ sy, ∓ 1); without ``weighted`` every A_f·φ_nb is φ_nb (``poisson._neighbour_sum``).  The neighbours
+    are read through shifted views indexed by the loop counter: no negative-index wrap-around tests, so the loop
+    vectorizes."""
+    n = out.shape[0]
+    xmx, xpx = x[start - sx:start - sx + n], x[start + sx:start + sx + n]
+    xmy, xpy = x[start - sy:start - sy + n], x[start + sy:start + sy + n]
+    xmz, xpz = x[start - 1:start - 1 + n], x[start + 1:start + 1 + n]
+    if weighted:
+        c0, c1, c2, c3, c4, c5 = (coefficients[0], coefficients[1], coefficients[2], coefficients[3],
+                                  coefficients[4], coefficients[5])
+        for t in range(n):
+            nb = ((c0[t] * xmx[t] + c1[t] * xpx[t]) + c2[t] * xmy[t]) + c3[t] * xpy[t]
+            out[t] = (nb + c4[t] * xmz[t]) + c5[t] * xpz[t]
+    else:
+        for t in range(n):
+            out[t] = ((((xmx[t] + xpx[t]) + xmy[t]) + xpy[t]) + xmz[t]) + xpz[t]
+
+
+@kernel
+def half_sweep_kernel(x, b, keep, scale, sx, sy, coefficients, weighted, start, s):  # pragma: no cover
+    """One colour of red–black Gauss–Seidel for M φ = b (the projection's 7-point Laplacian): over the span,
+    φ ← keep·φ + scale·(b + Σ A φ_nb), with scale = 1/diag on the colour's active cells and 0 elsewhere, keep
+    the complement.  ``x`` is the padded flat iterate (in place), ``start`` the span's first index, ``s`` scratch;
+    all sums from the old iterate first, then the blend, as the numpy code."""
+    n = s.shape[0]
+    _neighbour_sums(x, sx, sy, coefficients, weighted, start, s)
+    xs = x[start:start + n]
+    for t in range(n):  # every sum is taken: the blend may now overwrite the iterate
+        xs[t] = keep[t] * xs[t] + scale[t] * (b[t] + s[t])
+
+
+@kernel
+def residual_kernel(x, b, diag, inactive, sx, sy, coefficients, weighted, start, r):  # pragma: no cover
+    """r = b − M φ over the span, 0 on inactive cells, (M φ)_c = diag_c·φ_c − Σ A φ_nb (the poisson module)."""
+    n = r.shape[0]
+    _neighbour_sums(x, sx, sy, coefficients, weighted, start, r)
+    xs = x[start:start + n]
+    for t in range(n):
+        v = b[t] - (diag[t] * xs[t] - r[t])
+        r[t] = np.float32(0.0) if inactive[t] else v

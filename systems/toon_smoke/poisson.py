@@ -83,6 +83,8 @@ class _FlatLevel:
     b_span: F32 = field(init=False)
     r_span: F32 = field(init=False)
     x_neighbours: tuple[F32, ...] = field(init=False)  # x shifted by each offset, over the span
+    coefficient_matrix: F32 = field(init=False)  # the coefficients (6, span) for the compiled smoother; (6, 0) when
+    # coefficients is None
     parent_index: NDArray[np.intp] | None = field(init=False)  # see below
     x_interior: F32 = field(init=False)  # the (nx, ny, nz) views of x, b and r (see :meth:`interior`), made once
     b_interior: F32 = field(init=False)
@@ -92,6 +94,8 @@ class _FlatLevel:
         lo, hi = self.span.start, self.span.stop
         self.x_span, self.b_span, self.r_span = self.x[self.span], self.b[self.span], self.r[self.span]
         self.x_neighbours = tuple(self.x[lo + o:hi + o] for o in self.offsets)
+        self.coefficient_matrix = (np.zeros((6, 0), np.float32) if self.coefficients is None
+                                   else np.ascontiguousarray(np.stack(self.coefficients), np.float32))
         self.x_interior, self.b_interior, self.r_interior = (self.interior(v) for v in (self.x, self.b, self.r))
         nx, ny, nz = (n - 2 for n in self.padded_shape)
         self.parent_index = None
@@ -295,6 +299,35 @@ def apply_operator(level: Level, phi: F32) -> F32:
 
 
 def _half_sweep(flat: _FlatLevel, keep: F32, scale: F32) -> None:
+    """One colour of red–black Gauss–Seidel, in place on ``flat.x``, compiled
+    (:func:`systems.toon_smoke.kernels.half_sweep_kernel`): the same bits as :func:`_half_sweep_numpy`."""
+    from systems.toon_smoke.kernels import half_sweep_kernel
+
+    half_sweep_kernel(flat.x, flat.b_span, keep, scale, flat.offsets[1], flat.offsets[3],
+                      flat.coefficient_matrix, flat.coefficients is not None, flat.span.start, flat.s)
+
+
+def _residual(flat: _FlatLevel) -> F32:
+    """b − M x on active cells, 0 elsewhere, into ``flat.r_span`` (compiled,
+    :func:`systems.toon_smoke.kernels.residual_kernel`; the same bits as :func:`_residual_numpy`)."""
+    from systems.toon_smoke.kernels import residual_kernel
+
+    residual_kernel(flat.x, flat.b_span, flat.diag, flat.inactive, flat.offsets[1], flat.offsets[3],
+                    flat.coefficient_matrix, flat.coefficients is not None, flat.span.start, flat.r_span)
+    return flat.r_span
+
+
+def _residual_numpy(flat: _FlatLevel) -> F32:
+    """b − M x on active cells, 0 elsewhere, into ``flat.r_span`` (numpy; the reference of :func:`_residual`)."""
+    residual = flat.r_span
+    np.multiply(flat.diag, flat.x_span, out=residual)
+    residual -= _neighbour_sum(flat)
+    np.subtract(flat.b_span, residual, out=residual)
+    np.copyto(residual, np.float32(0.0), where=flat.inactive)
+    return residual
+
+
+def _half_sweep_numpy(flat: _FlatLevel, keep: F32, scale: F32) -> None:
     """One colour of red–black Gauss–Seidel, in place on ``flat.x``: φ ← keep·φ + inv_diag_colour·(b + Σ A φ_nb),
     an arithmetic blend (no boolean scatter); the other colour's cells and inactive cells keep their value."""
     s = _neighbour_sum(flat)
@@ -332,11 +365,7 @@ def _v_cycle(levels: list[Level], depth: int) -> None:
     for _ in range(_SMOOTH_SWEEPS - 1):
         _half_sweep(flat, flat.keep_red, flat.red_inv_diag)
         _half_sweep(flat, flat.keep_black, flat.black_inv_diag)
-    residual = flat.r_span  # b − M x on active cells, 0 elsewhere
-    np.multiply(flat.diag, x, out=residual)
-    residual -= _neighbour_sum(flat)
-    np.subtract(flat.b_span, residual, out=residual)
-    np.copyto(residual, np.float32(0.0), where=flat.inactive)
+    _residual(flat)  # b − M x on active cells, 0 elsewhere
     coarse = levels[depth + 1].flat
     _restrict_into(flat, coarse)
     _v_cycle(levels, depth + 1)
