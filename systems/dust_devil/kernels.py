@@ -53,7 +53,6 @@ def advance_particles(positions, ages, lifetimes, dead, flat, known, dims, grid_
     n = np.zeros(3)
     nxt = np.zeros(3)
     world = np.zeros(3)
-    sample = np.zeros(4)  # heights at (xb, z), (xa, z), (x, zb), (x, za) for the normal
     made = 0
     for i in range(positions.shape[0]):
         px, py, pz = positions[i, 0], positions[i, 1], positions[i, 2]
@@ -120,13 +119,9 @@ def advance_particles(positions, ages, lifetimes, dead, flat, known, dims, grid_
             if terrain:
                 for attempt in range(2):  # the step, then (eq. 1 applied) the projected step
                     # depth below the ground of nxt: HeightField.height_at (bilinear, clamped) minus local y
-                    gxh = min(max((nxt[0] - ground_position[0] - x_lo) / spacing, 0.0), cols - 1)
-                    gzh = min(max((nxt[2] - ground_position[2] - z_lo) / spacing, 0.0), rows - 1)
-                    c0i, r0i = min(int(gxh), cols - 2), min(int(gzh), rows - 2)
-                    tx, tz = gxh - c0i, gzh - r0i
-                    top = heights[r0i, c0i] + tx * (heights[r0i, c0i + 1] - heights[r0i, c0i])
-                    bottom = heights[r0i + 1, c0i] + tx * (heights[r0i + 1, c0i + 1] - heights[r0i + 1, c0i])
-                    depth = (top + tz * (bottom - top)) - (nxt[1] - ground_position[1])
+                    ground = _ground_height(nxt[0] - ground_position[0], nxt[2] - ground_position[2], heights,
+                                            x_lo, z_lo, spacing)
+                    depth = ground - (nxt[1] - ground_position[1])
                     if attempt == 1 or depth <= 0.0:
                         break
                     # HeightField.normal_at under the current point: central differences over ±spacing/2
@@ -134,18 +129,12 @@ def advance_particles(positions, ages, lifetimes, dead, flat, known, dims, grid_
                     z = min(max(world[2] - ground_position[2], z_lo), z_hi)
                     xa, xb = max(x - e, x_lo), min(x + e, x_hi)
                     za, zb = max(z - e, z_lo), min(z + e, z_hi)
-                    for q in range(4):
-                        sx = xb if q == 0 else xa if q == 1 else x
-                        sz = z if q < 2 else zb if q == 2 else za
-                        gxh = min(max((sx - x_lo) / spacing, 0.0), cols - 1)
-                        gzh = min(max((sz - z_lo) / spacing, 0.0), rows - 1)
-                        c0i, r0i = min(int(gxh), cols - 2), min(int(gzh), rows - 2)
-                        tx, tz = gxh - c0i, gzh - r0i
-                        top = heights[r0i, c0i] + tx * (heights[r0i, c0i + 1] - heights[r0i, c0i])
-                        bottom = heights[r0i + 1, c0i] + tx * (heights[r0i + 1, c0i + 1] - heights[r0i + 1, c0i])
-                        sample[q] = top + tz * (bottom - top)
-                    dnx = -((sample[0] - sample[1]) / (xb - xa))
-                    dnz = -((sample[2] - sample[3]) / (zb - za))
+                    east = _ground_height(xb, z, heights, x_lo, z_lo, spacing)
+                    west = _ground_height(xa, z, heights, x_lo, z_lo, spacing)
+                    north = _ground_height(x, zb, heights, x_lo, z_lo, spacing)
+                    south = _ground_height(x, za, heights, x_lo, z_lo, spacing)
+                    dnx = -((east - west) / (xb - xa))
+                    dnz = -((north - south) / (zb - za))
                     length = np.sqrt(dnx * dnx + 1.0 + dnz * dnz)
                     n[0], n[1], n[2] = dnx / length, 1.0 / length, dnz / length
                     nv = n[0] * v[0] + n[1] * v[1] + n[2] * v[2]

@@ -169,26 +169,32 @@ def repulsion_sums(query, first, cells, offsets, tables, strength, limit, counts
                     phase -= math.floor(phase)
                     for k in range(taken):
                         slot = min(start + int((k + phase) * stride), n - 1)
-                        dx, dy, dz = px - xyz[slot, 0], py - xyz[slot, 1], pz - xyz[slot, 2]
-                        d2 = dx * dx + dy * dy + dz * dz
-                        w = stride / d2 if d2 <= reach and d2 > SAME_POINT else 0.0  # a select: no branch
-                        bx += dx * w
-                        by += dy * w
-                        bz += dz * w
+                        wx, wy, wz = _push(px, py, pz, xyz, slot, stride, reach)
+                        bx += wx
+                        by += wy
+                        bz += wz
                 else:
                     for slot in range(start, start + count):
-                        dx, dy, dz = px - xyz[slot, 0], py - xyz[slot, 1], pz - xyz[slot, 2]
-                        d2 = dx * dx + dy * dy + dz * dz
-                        w = stride / d2 if d2 <= reach and d2 > SAME_POINT else 0.0  # a select: no branch
-                        bx += dx * w
-                        by += dy * w
-                        bz += dz * w
+                        wx, wy, wz = _push(px, py, pz, xyz, slot, stride, reach)
+                        bx += wx
+                        by += wy
+                        bz += wz
                 tx += bx
                 ty += by
                 tz += bz
             out[q, 0] = tx * strength[g]
             out[q, 1] = ty * strength[g]
             out[q, 2] = tz * strength[g]
+
+
+@kernel(inline="always")
+def _push(px, py, pz, xyz, slot, stride, reach):
+    """Eq. 3.3's term of neighbour ``slot`` on the point (px, py, pz): (p − q) · stride / |p − q|², zero out of
+    reach or at the same point (a select: half the samples are in reach, a branch would be mispredicted)."""
+    dx, dy, dz = px - xyz[slot, 0], py - xyz[slot, 1], pz - xyz[slot, 2]
+    d2 = dx * dx + dy * dy + dz * dz
+    w = stride / d2 if d2 <= reach and d2 > SAME_POINT else 0.0
+    return dx * w, dy * w, dz * w
 
 
 @kernel(inline="always")

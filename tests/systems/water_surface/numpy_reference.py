@@ -1,103 +1,21 @@
 """The numpy water step as it was before the compiled kernels (systems/water_surface/kernels.py): the reference the
 kernels are tested against, bit for bit (tests/systems/water_surface/test_kernels.py). Frozen copy of
-``surface.step_water`` and its helpers at commit a4a7906; it uses the package's numpy functions (outline.py,
-waves.py, geometry.py), which stay as the readable statement of the method."""
+``surface.step_water`` and the helpers it has since replaced, at commit a4a7906; it uses the package's numpy
+functions (outline.py, waves.py, geometry.py, and surface.py's helpers the kernels left unchanged), which stay as
+the readable statement of the method."""
 from __future__ import annotations
-
-from dataclasses import dataclass, field
 
 import numpy as np
 
 from components.water_surface import WaterState, WaterSurface
-from systems.water_surface.geometry import (F64, I64, Bodies, Grid, all_of, any_of, bilinear, bilinear_fields, ranges,
-                                            sum_of)
-from systems.water_surface.grid_source import column_depths
+from systems.water_surface.geometry import F64, Bodies, Grid, all_of, bilinear_fields
 from systems.water_surface.outline import (AddedPoints, Sections, added_points, coupling_pairs, cross_sections,
                                            nudge, outline_impulse, solid_vertices)
-from systems.water_surface.waves import courant_k, dents, free_degree, propagate
+from systems.water_surface.surface import (StepReport, _disturb, _grid_step, _scratch, _slots, _solid_index,
+                                           _water_mean, plane_levels)
+from systems.water_surface.waves import courant_k, free_degree, propagate
 
-__all__ = ["StepReport", "plane_levels", "step_water"]
-
-
-@dataclass
-class StepReport:
-    """What one step did (for tests, benchmarks and the debug view)."""
-
-    bodies: Bodies
-    plane_y: F64
-    sections: Sections | None = None
-    points: AddedPoints | None = None
-    change: F64 = field(default_factory=lambda: np.zeros(0))  # ±α·d(t) per added point
-    raised: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
-    lowered: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
-    solid: I64 = field(default_factory=lambda: np.zeros(0, np.int64))
-    column_change: F64 | None = None  # 'grid' method: α·(b(t) − b(t−1)) per vertex
-
-
-def plane_levels(z: F64, solid: np.ndarray, bodies: Bodies, grid: Grid) -> F64:
-    """S'_z − y0 for each body: the mean height of the water vertices under its footprint (section 2.2.2); the
-    vertices that were inside a body at the last step are not water and do not count (unless nothing else is
-    there: then they hold the last S'). A body whose footprint holds no vertex takes the height at its centre."""
-    centre = grid.to_uv(bodies.position[:, ::2])
-    half = bodies.horizontal_half() / grid.h
-    lo = np.maximum(np.ceil(centre - half), 0).astype(np.int64)
-    hi = np.minimum(np.floor(centre + half), (grid.nx - 1, grid.nz - 1)).astype(np.int64)
-    size = np.maximum(hi - lo + 1, 0)
-    if len(bodies) <= _LOOP_BODIES:  # a few bodies: one slice mean each
-        empty = ~all_of(size, axis=1)
-        levels = bilinear(z, centre) if any_of(empty, axis=None) else np.empty(len(bodies))
-        for b in (~empty).nonzero()[0]:
-            window = (slice(lo[b, 1], hi[b, 1] + 1), slice(lo[b, 0], hi[b, 0] + 1))
-            water = z[window][~solid[window]]
-            levels[b] = water.mean() if len(water) else z[window].mean()
-        return levels
-    count = size[:, 0] * size[:, 1]  # many: every window vertex at once, summed per body
-    body, offset = ranges(np.zeros(len(bodies), np.int64), count)
-    dv, du = np.divmod(offset, size[:, 0].take(body))
-    flat = (lo[:, 1].take(body) + dv) * grid.nx + lo[:, 0].take(body) + du
-    height, water = z.ravel().take(flat), ~solid.ravel().take(flat)
-    n_water = np.bincount(body, water, len(bodies))
-    wet = np.bincount(body, np.where(water, height, 0.0), len(bodies)) / np.maximum(n_water, 1)
-    every = np.bincount(body, height, len(bodies)) / np.maximum(count, 1)
-    if all_of(n_water > 0, axis=None):
-        return wet
-    return np.where(n_water > 0, wet, np.where(count > 0, every, bilinear(z, centre)))
-
-
-_LOOP_BODIES = 3
-
-
-def _scratch(state: WaterState) -> F64:
-    """A work array of the grid's shape kept with the state (not part of it)."""
-    if state.scratch is None or state.scratch.shape != state.heights.shape:
-        state.scratch = np.empty_like(state.heights)
-    return state.scratch
-
-
-def _slots(state: WaterState) -> I64:
-    """An int64 work array kept with the state, one entry per vertex and per square of the grid padded by a
-    border of squares (for grouping vertex indices and looking up squares)."""
-    nz, nx = state.heights.shape
-    if state.slots is None or state.slots.size != (nz + 2) * (nx + 3):
-        state.slots = np.empty((nz + 2) * (nx + 3), np.int64)
-    return state.slots
-
-
-def _water_mean(field: F64, solid: I64 | None) -> float:
-    """Mean height of the vertices that are water (all but the flat indices ``solid``)."""
-    if solid is None:
-        return float(field.mean())
-    return float((sum_of(field, axis=None) - sum_of(field.ravel()[solid])) / (field.size - len(solid)))
-
-
-def _solid_index(state: WaterState) -> I64 | None:
-    """Flat indices of the vertices inside bodies (``state.solid``), None when there are none."""
-    cached = state.solid_index
-    if cached is not None and cached[0] is state.solid:
-        index = cached[1]
-    else:
-        index = state.solid.ravel().nonzero()[0]
-    return index if len(index) else None
+__all__ = ["step_water"]
 
 
 def _near(bodies: Bodies, grid: Grid, state: WaterState, depth: float) -> np.ndarray:
@@ -158,24 +76,6 @@ def _carried(state: WaterState, points: AddedPoints, z: F64, zp: F64) -> tuple[F
         new = (~same).nonzero()[0]
         heights[new], previous[new] = bilinear_fields((z, zp), points.uv.take(new, axis=0))
     return heights, previous
-
-
-def _disturb(state: WaterState, cfg: WaterSurface, grid: Grid, dt: float, rng: np.random.Generator | None) -> None:
-    """Random drops (``disturbance_rate``) and pending impact dents, as displacements without velocity."""
-    centres, heights, radius = [], [], max(cfg.disturbance_radius, grid.h)
-    if cfg.disturbance_rate > 0.0 and rng is not None:
-        n = int(rng.poisson(cfg.disturbance_rate * dt))
-        centres.append(rng.uniform((0.0, 0.0), (grid.nx - 1, grid.nz - 1), size=(n, 2)))
-        heights.append(cfg.disturbance_height * rng.uniform(0.5, 1.0, size=n))
-    if state.splashes:
-        splash = np.array(state.splashes, dtype=np.float64).reshape(-1, 3)
-        centres.append(splash[:, :2])
-        heights.append(splash[:, 2])
-        state.splashes = []
-    if centres:
-        flat, change = dents(grid, np.concatenate(centres), np.concatenate(heights), radius)
-        state.heights.ravel()[flat] += change
-        state.previous.ravel()[flat] += change
 
 
 def step_water(state: WaterState, cfg: WaterSurface, grid: Grid, bodies: Bodies, dt: float,
@@ -263,23 +163,3 @@ def _outline_step(state, cfg, grid, bodies, sections, levels, plane_y, k, report
     report.change, report.raised, report.lowered, report.solid = change, raised, lowered, solid
     return new, new_points, points, heights
 
-
-def _grid_step(state, cfg, grid, bodies, plane_y, k, report):
-    """The older method (figure 3.4): the change of submerged depth displaces the vertices under the body."""
-    z, zp = state.heights, state.previous
-    column = np.zeros(z.shape)
-    flat, depth = column_depths(bodies, plane_y, grid)
-    column.ravel()[flat] = depth
-    before = state.column_depth.copy() if state.column_depth is not None else np.zeros(z.shape)
-    new_body = ~np.isin(bodies.entities, state.body_entities)
-    if new_body.any():  # a body that just appeared has no earlier depth: it starts making waves once it moves
-        flat, depth = column_depths(bodies.take(new_body), plane_y[new_body], grid)
-        before.ravel()[flat] += depth
-    change = cfg.outline_constant * (column - before)
-    z += change  # a displacement (with z(t − 1), so no velocity is injected)
-    zp += change
-    state.column_depth = column
-    state.solid = np.zeros(z.shape, bool)
-    new, _ = propagate(z, zp, k, state.coefficient, state.degree, scratch=_scratch(state), reuse=True)
-    report.column_change = change
-    return new, np.zeros(0), AddedPoints.empty(), np.zeros(0)
