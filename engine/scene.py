@@ -61,6 +61,11 @@ class RenderSettings(ConfigModel):
                                                   "draws the previous state (one frame more latency; a software "
                                                   "rasteriser then draws on its threads while Python simulates). "
                                                   "False: tick, then draw, one after the other.")
+    static_layer_cache: bool = Field(True, description="Keep each view's static layer (the clear, the terrain, the "
+                                                       "sky and the other opaque features that declare a static key) "
+                                                       "once it was the same two frames running, and copy it back "
+                                                       "instead of redrawing it while the camera, the light and "
+                                                       "those features stay unchanged; the picture is the same bits.")
     sky_top: Vec3 = Field((0.25, 0.45, 0.85), description="Sky colour at the zenith (linear RGB).")
     sky_horizon: Vec3 = Field((0.75, 0.85, 0.95), description="Sky colour at the horizon (linear RGB).")
     sun_direction: Vec3 = Field((0.4, 0.8, 0.3), description="Direction towards the sun.")

@@ -93,5 +93,18 @@ class RenderFeature:
     def add_passes(self, graph: RenderGraph, view: View, data: Any) -> None:
         """Declare this feature's passes for ``view``."""
 
+    def static_key(self, view: View, data: Any) -> Any:
+        """A hashable key of everything this feature draws into ``view`` apart from the view itself (camera,
+        size, light, sky colours and fog are the renderer's part of the key), or None when it must draw every
+        frame (the default).
+
+        Only OPAQUE and SKY features may return a key, and only when their passes write colour and depth as a
+        pure function of that key and the view: no time, no random numbers, no state outside ``data``.  While the
+        key stays the same the renderer may copy the view's static layer back from a kept picture instead of
+        running the passes (``[render] static_layer_cache``); returning a key that misses a change shows a stale
+        picture.
+        """
+        return None
+
     def release(self) -> None:
         """Free GL objects."""

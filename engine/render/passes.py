@@ -95,6 +95,9 @@ class SkyFeature(RenderFeature):
             vao.release()
         self._vaos.clear()
 
+    def static_key(self, view: View, data) -> Any:
+        return ()  # a function of the view and the light alone (the renderer's part of the static key)
+
     def add_passes(self, graph, view: View, data) -> None:
         def setup(b):
             view.color = b.write(view.color)
@@ -211,6 +214,13 @@ class TerrainFeature(RenderFeature):
             key = (id(terrain.field.heights), terrain.field.heights.shape, terrain.field.spacing)
             out.append((entity, key, terrain, t.matrix().astype(np.float32)))
         return out
+
+    def static_key(self, view: View, data) -> Any:
+        """The terrains drawn (height field, model matrix, colours, level-of-detail bound): the level selection
+        and the baked light follow from them, the view and the light."""
+        return (self.vertex_shade,) + tuple(
+            (entity, key, model.tobytes(), terrain.config.lod_pixels, tuple(map(tuple, terrain.config.colors)))
+            for entity, key, terrain, model in data)
 
     def _mesh(self, entity: int, key: tuple, terrain: Terrain) -> _TerrainMesh:
         mesh = self._meshes.get(entity)
@@ -363,6 +373,10 @@ class MeshFeature(RenderFeature):
             data[:, 19] = [m.emissive for _, m in items]
             out[shape] = data
         return out
+
+    def static_key(self, view: View, data) -> Any:
+        """Every instance's matrix, colour and emission: unchanged while nothing moves."""
+        return tuple((shape, inst.tobytes()) for shape, inst in sorted(data.items()))
 
     def _vao(self, shape: str, count: int, defines: tuple[str, ...]) -> moderngl.VertexArray:
         """The shape's VAO for the program variant ``defines`` over its instance buffer (grown as needed)."""

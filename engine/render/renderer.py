@@ -12,7 +12,7 @@ from __future__ import annotations
 import logging
 import re
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -21,7 +21,7 @@ import moderngl
 import numpy as np
 
 from engine.render.components import Camera, Hud, look_at, projection, view_matrix, viewport_pixels
-from engine.render.feature import OVERLAY, RenderFeature, View
+from engine.render.feature import OVERLAY, SKY, RenderFeature, View
 from engine.render.graph import RenderGraph, ResourcePool, TextureDesc
 from engine.spatial import Transform
 
@@ -111,6 +111,20 @@ class PassTimer:
         return "\n".join(lines)
 
 
+@dataclass
+class _StaticLayer:
+    """A view's kept static layer (Renderer._plan_static_layer): HDR colour and depth, and the key they show."""
+
+    color: moderngl.Texture
+    depth: moderngl.Texture
+    key: tuple | None = None  # set once the copy into the textures is made
+    pending: tuple | None = None  # the key of the layer being stored this frame
+
+    @property
+    def size(self) -> tuple[int, int]:
+        return self.color.size
+
+
 class _TimedGraph:
     """The graph as features see it: add_pass wraps each execute callback with the timer."""
 
@@ -156,6 +170,12 @@ class Renderer:
         self._final: moderngl.Texture | None = None
         # camera entity -> (kept picture, frame index and game time it was rendered) of a view rendered every N frames
         self._held: dict[int, tuple[moderngl.Texture, int, float]] = {}
+        # camera entity -> its view's kept static layer; and the static key each camera's view had last frame
+        self._static: dict[int, _StaticLayer] = {}
+        self._static_last: dict[int, tuple | None] = {}
+        self._static_features: dict[int, dict[str, Any]] = {}  # camera -> feature name -> static key last frame
+        self.static_layer_counts = {"drawn": 0, "stored": 0, "restored": 0}  # views per outcome (tests, profiling)
+        self._shader_generation = 0  # bumped by reload_shaders: kept pictures drawn with older shaders are stale
         self._final_fbo: moderngl.Framebuffer | None = None
         self._resize_final()
         from engine.render.passes import builtin_features
@@ -225,6 +245,7 @@ class Renderer:
         Returns the compile errors (empty when all compiled).  F5 in the window calls this with the config reload.
         """
         errors = []
+        self._shader_generation += 1
         for key in list(self._loaded):
             old = self._loaded.pop(key)
             try:
@@ -341,14 +362,31 @@ class Renderer:
         timed = _TimedGraph(graph, self.timer)
         final = graph.import_resource("final", self._final, TextureDesc(self.width, self.height, "rgba8"))
         self._plan_held_views()
+        live = set()
         for view in self.views:
+            live.add(view.camera_entity)
             if view.extra.get("held") == "shown":  # its last picture is shown again: nothing to draw
                 continue
-            self._declare_view_targets(timed, view)
             hidden = view.extra.get("hide", ())
-            for index, feature in self._ordered:
-                if feature.phase < OVERLAY and feature.name not in hidden:
+            features = [(i, f) for i, f in self._ordered if f.phase < OVERLAY and f.name not in hidden]
+            static = self._plan_static_layer(view, features, data)
+            if static is None:
+                self._declare_view_targets(timed, view)
+            elif view.extra["static_layer"] == "restored":
+                self._declare_static_restore(timed, view)
+            else:  # "stored": the static features first, then a copy of what they drew into the kept layer
+                self._declare_view_targets(timed, view)
+                for index, feature in static:
                     feature.add_passes(timed, view, data[index])
+                self._declare_static_store(timed, view)
+            for index, feature in features:
+                if static is None or (index, feature) not in static:
+                    feature.add_passes(timed, view, data[index])
+        for camera in [c for c in self._static if c not in live]:  # cameras gone
+            self._free_static(camera)
+        for camera in [c for c in self._static_last if c not in live]:
+            del self._static_last[camera]
+            self._static_features.pop(camera, None)
         for i, view in enumerate(self.views):
             final = self._declare_present(timed, final, view, first=i == 0)
         screen = replace(self.views[0], name="screen", width=self.width, height=self.height,
@@ -403,6 +441,111 @@ class Renderer:
                 fbo.clear(*self.settings.sky_horizon, 1.0, depth=1.0)
 
         graph.add_pass(f"clear.{view.name}", setup, execute)
+
+    # ---------------------------------------------------------- static layer
+    def _plan_static_layer(self, view: View, features: list, data: list) -> list | None:
+        """The view's static layer this frame: the OPAQUE and SKY features whose static key
+        (:meth:`RenderFeature.static_key`) is the one they had last frame, or None when the view is drawn as usual.
+
+        The layer's key is the view's (camera matrices, size, light, sky colours, fog, hidden features, shader
+        generation) plus those features' keys.  When the kept layer has this key it is copied back ("restored":
+        one memory copy of colour and depth instead of the clear and the features' passes); when the key is
+        the one of the previous frame the layer is drawn first and copied into the kept layer ("stored");
+        otherwise (a moving camera) the frame is drawn as it would be without the cache ("drawn").  A feature
+        whose key changes every frame (meshes that move) stays out of the layer and draws over it.  Drawn
+        first, the sky fills the far pixels before the other opaque features cover some of them: they write
+        their own colour and depth over it, so the picture is the same bits in all three cases.
+        """
+        if not self.settings.static_layer_cache:
+            return None
+        camera = view.camera_entity
+        before, now = self._static_features.get(camera, {}), {}
+        static, keys = [], []
+        for index, feature in features:
+            if feature.phase > SKY:
+                break
+            key = feature.static_key(view, data[index])
+            if key is None:
+                continue
+            now[feature.name] = key
+            if feature.name in before and before[feature.name] == key:
+                static.append((index, feature))
+                keys.append((feature.name, key))
+        self._static_features[camera] = now
+        key = (self._view_key(view), tuple(keys), self._shader_generation) if static else None
+        last, self._static_last[camera] = self._static_last.get(camera), key
+        kept = self._static.get(camera)
+        size = (view.width, view.height)
+        if key is None:
+            outcome = "drawn"
+        elif kept is not None and kept.key == key and kept.size == size:
+            outcome = "restored"
+        elif last == key:  # the same two frames running: worth keeping
+            if kept is None or kept.size != size:
+                self._free_static(camera)
+                kept = self._static[camera] = _StaticLayer(
+                    self._make_resource(TextureDesc(view.width, view.height, "rgba16f")),
+                    self._make_resource(TextureDesc(view.width, view.height, "depth24")))
+            kept.key, kept.pending = None, key
+            outcome = "stored"
+        else:
+            outcome = "drawn"
+        view.extra["static_layer"] = outcome
+        self.static_layer_counts[outcome] += 1
+        return None if outcome == "drawn" else static
+
+    def _view_key(self, view: View) -> tuple:
+        s = self.settings
+        return (view.width, view.height, view.view.tobytes(), view.proj.tobytes(), view.camera_pos.tobytes(),
+                view.ortho, frozenset(view.extra.get("hide", ())), self.sun_direction.tobytes(),
+                self.sun_color.tobytes(), self.ambient, tuple(s.sky_top), tuple(s.sky_horizon), s.fog_density)
+
+    def _static_layer_resources(self, graph, view: View) -> tuple:
+        kept = self._static[view.camera_entity]
+        return (graph.import_resource(f"{view.name}.static_color", kept.color,
+                                      TextureDesc(view.width, view.height, "rgba16f")),
+                graph.import_resource(f"{view.name}.static_depth", kept.depth,
+                                      TextureDesc(view.width, view.height, "depth24")))
+
+    def _declare_static_restore(self, graph, view: View) -> None:
+        color, depth = self._static_layer_resources(graph, view)
+
+        def setup(b):
+            b.read(color)
+            b.read(depth)
+            view.color = b.write(b.create(f"{view.name}.hdr", TextureDesc(view.width, view.height, "rgba16f")))
+            view.depth = b.write(b.create(f"{view.name}.depth", TextureDesc(view.width, view.height, "depth24")))
+
+        def execute(pc):
+            target = self.framebuffer(pc.get(view.color), pc.get(view.depth))
+            target.use()  # its own viewport and no scissor: a blit is clipped by the scissor test
+            self.ctx.copy_framebuffer(target, self.framebuffer(pc.get(color), pc.get(depth)))
+
+        graph.add_pass(f"static_restore.{view.name}", setup, execute)
+
+    def _declare_static_store(self, graph, view: View) -> None:
+        color, depth = self._static_layer_resources(graph, view)
+        kept = self._static[view.camera_entity]
+
+        def setup(b):
+            b.read(view.color)
+            b.read(view.depth)
+            b.write(color)
+            b.write(depth)
+
+        def execute(pc):
+            target = self.framebuffer(pc.get(color), pc.get(depth))
+            target.use()
+            self.ctx.copy_framebuffer(target, self.framebuffer(pc.get(view.color), pc.get(view.depth)))
+            kept.key = kept.pending  # valid only once the copy is made (a frame that raised keeps nothing)
+
+        graph.add_pass(f"static_store.{view.name}", setup, execute, side_effect=True)
+
+    def _free_static(self, camera: int) -> None:
+        kept = self._static.pop(camera, None)
+        if kept is not None:
+            self._free_resource(kept.color)
+            self._free_resource(kept.depth)
 
     HELD_MAX_AGE = 0.25  # seconds of game time a kept picture may lag behind the world
 
@@ -500,6 +643,9 @@ class Renderer:
         for tex, _, _ in self._held.values():
             self._free_resource(tex)
         self._held.clear()
+        for camera in list(self._static):
+            self._free_static(camera)
+        self._static_last.clear()
         self.graph.pool.clear()
         for fbo in self._framebuffers.values():
             fbo.release()
