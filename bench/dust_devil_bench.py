@@ -89,16 +89,28 @@ def make_app(width: int, height: int, particles: int, cameras: str, extra: str =
 
 
 def bench_render(label: str, width: int, height: int, particles: int, cameras: str, frames: int,
-                 extra: str = "", passes: bool = False, overlap: bool = True) -> tuple[float, float]:
+                 extra: str = "", passes: bool = False, overlap: bool = True, orbit: float = 0.0,
+                 cache: bool = True) -> tuple[float, float]:
     """(median wall-clock frame, median CPU time per frame) of one fixed step then the frame, glFinish'd; prints
     them with the best frame, the process CPU time per frame (all of llvmpipe's threads: steadier than wall time
     on a shared machine) and the PBVR path; ``overlap``: then the frame with the next step run while llvmpipe
     rasterises it (as the engine runs); ``passes``: then the per-pass times (each pass followed by glFinish, so
-    they add up to more than a pipelined frame)."""
+    they add up to more than a pipelined frame); ``orbit``: degrees the orbit camera turns every frame (a moving
+    camera: the static layer, terrain and sky, is drawn every frame); ``cache``: ``[render] static_layer_cache``."""
+    from engine.render.components import Camera
+
     from engine.render.frontend import create_headless_context
     from engine.render.renderer import Renderer
 
     app = make_app(width, height, particles, cameras, extra)
+    app.config.render.static_layer_cache = cache
+    orbiting = [cam for _, (cam,) in app.world.query(Camera) if cam.config.controller == "orbit"]
+
+    def step() -> None:  # one fixed step, the orbit camera turned first when the camera moves
+        for cam in orbiting:
+            cam.yaw = (cam.yaw + orbit) % 360.0
+        app.step(1)
+
     app.step(1)  # emission + prewarm
     renderer = Renderer(app, create_headless_context(), width, height)
     feature = next(f for f in renderer.features if f.name == "dust_devil")
@@ -107,13 +119,13 @@ def bench_render(label: str, width: int, height: int, particles: int, cameras: s
     if PIXEL_TERRAIN:  # A/B: full-detail terrain chunks fetch the baked light per pixel too (no Gouraud variant)
         next(f for f in renderer.features if f.name == "terrain").vertex_shade = False
     for _ in range(3):  # warm up: shader compilation, pool allocation
-        app.step(1)
+        step()
         app.render_frame()
     renderer.ctx.finish()
     times, sims, cpus = [], [], []
     for _ in range(frames):
         t0, c0 = time.perf_counter(), time.process_time()
-        app.step(1)
+        step()
         t1 = time.perf_counter()
         app.render_frame()
         renderer.ctx.finish()
@@ -129,7 +141,7 @@ def bench_render(label: str, width: int, height: int, particles: int, cameras: s
         overlapped = []
         for _ in range(frames):
             t0 = time.perf_counter()
-            app.render_frame(overlap=lambda: app.step(1))
+            app.render_frame(overlap=step)
             renderer.ctx.finish()
             overlapped.append(time.perf_counter() - t0)
         median = statistics.median(overlapped)
@@ -140,7 +152,7 @@ def bench_render(label: str, width: int, height: int, particles: int, cameras: s
         renderer.timer.totals.clear()
         renderer.timer.frames = 0
         for _ in range(min(frames, 20)):
-            app.step(1)
+            step()
             app.render_frame()
         print("    " + renderer.timer.report().replace("\n", "\n    "))
     renderer.release()
@@ -187,6 +199,10 @@ def main() -> int:
         frame, cpu = bench_render("640 x 480, one view", 640, 480, 5000, ONE_VIEW, args.frames, passes=args.passes)
         print(f"  {'paper (Xeon 2.53 GHz, 2012)':<50s} {'13-17':>6s} fps   (here {1 / frame / 15.0:.2f}x the paper's "
               "mid-range; target >= 60 fps)")
+        bench_render("640 x 480, one view, camera turning 0.5° a frame", 640, 480, 5000, ONE_VIEW, args.frames,
+                     orbit=0.5)
+        bench_render("640 x 480, one view, static layer cache off", 640, 480, 5000, ONE_VIEW, args.frames,
+                     cache=False)
         bench_render("two 640 x 480 views (top + oblique), 1280 x 480", 1280, 480, 5000, TWO_VIEWS, args.frames)
         _, drag = bench_render("640 x 480, while dragging (R = 4)", 640, 480, 5000, ONE_VIEW, args.frames,
                                "repeats = 4\ndrag_repeats = 4")
