@@ -1,12 +1,13 @@
 """The energy-wave render feature: additive billboards expanded on the GPU, plus a glow (bloom) pass.
 
 Per frame, :func:`~systems.energy_wave.extract.extract_frame` packs one record per particle; they are uploaded to
-an RGBA32F texture (three texels a record) and drawn as camera-facing quads (two triangles over four corners, an
-index buffer so that each corner is shaded once) with no vertex attributes: per emitter, one draw for single sprites,
-one for trails (6 indices × particles × M) and one for bars (6 × particles × N); the vertex shader finds its
-particle, sub-sprite and corner from ``gl_VertexID`` (eqs. 3.7–3.9). (Not instanced: llvmpipe runs its vertex pipeline once per instance,
-a fixed cost that made up most of the vertex work.) Blending is additive (ONE, ONE), depth-tested against the scene
-with no depth writes, so no sorting is needed.
+an RGBA32F texture (three texels a record) and drawn as camera-facing squares with no vertex attributes, three
+draws per emitter (single sprites, trails of M, bars of N); the vertex shader finds its particle and sub-sprite
+from ``gl_VertexID`` (eqs. 3.7–3.9).  Each sprite is a point sprite (one vertex; ``gl_PointSize`` is the projected
+side of the camera-facing quad), or, in a frame where a sprite could exceed the driver's largest point, a quad
+(two triangles over four corners, an index buffer so that each corner is shaded once).  (Not instanced: llvmpipe
+runs its vertex pipeline once per instance, a fixed cost that made up most of the vertex work.)  Blending is
+additive (ONE, ONE), depth-tested against the scene with no depth writes, so no sorting is needed.
 
 Passes per view, in the transparent phase (off-screen particles, Nguyen, GPU Gems 3 ch. 23: the soft sprites are
 fill-rate bound, so they are drawn at half resolution):
@@ -58,11 +59,9 @@ def radial_gradient(r2: np.ndarray) -> np.ndarray:
     return np.where(r2 < 1.0, (1.0 - r2) ** 2 * np.exp(-3.0 * r2), 0.0)
 
 
-def sprite_bounds(data: FrameData, view_proj: np.ndarray, right: np.ndarray, up: np.ndarray) -> UV | None:
-    """Texture-coordinate bounds of every sprite of the frame in a view; (0, 0, 1, 1) when one reaches behind the
-    camera. The sprites of a trail (eq. 3.7) or a bar (eq. 3.8) lie on the segment between two end points, each
-    within the camera-facing square of the emitter's largest sprite size (eq. 3.9, trail scale); the square is
-    planar and convex and projection keeps convex hulls, so the projected corners of the ends' squares bound them."""
+def _sprite_ends(data: FrameData, view_proj: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """Clip coordinates of the end points of every sprite run (a single sprite, a trail's P0 and P1, a bar's two
+    tips) and the largest sprite half-size of each run's emitter (eq. 3.9, trail scale); None without sprites."""
     m = view_proj.astype(np.float64)
     clips, sizes = [], []
     for emitter in data.emitters:
@@ -83,7 +82,19 @@ def sprite_bounds(data: FrameData, view_proj: np.ndarray, right: np.ndarray, up:
         sizes += [np.full(len(e), size) for e in ends]
     if not clips:
         return None
-    clip, size = np.concatenate(clips), np.concatenate(sizes)
+    return np.concatenate(clips), np.concatenate(sizes)
+
+
+def sprite_bounds(data: FrameData, view_proj: np.ndarray, right: np.ndarray, up: np.ndarray) -> UV | None:
+    """Texture-coordinate bounds of every sprite of the frame in a view; (0, 0, 1, 1) when one reaches behind the
+    camera. The sprites of a trail (eq. 3.7) or a bar (eq. 3.8) lie on the segment between two end points, each
+    within the camera-facing square of the emitter's largest sprite size (eq. 3.9, trail scale); the square is
+    planar and convex and projection keeps convex hulls, so the projected corners of the ends' squares bound them."""
+    ends = _sprite_ends(data, view_proj)
+    if ends is None:
+        return None
+    clip, size = ends
+    m = view_proj.astype(np.float64)
     dx = np.abs(m[:, :3] @ np.asarray(right, np.float64))  # clip-space change along the square's sides
     dy = np.abs(m[:, :3] @ np.asarray(up, np.float64))
     reach = dx + dy  # per unit of size: a corner's clip coordinates lie within centre ± reach·size
@@ -97,6 +108,20 @@ def sprite_bounds(data: FrameData, view_proj: np.ndarray, right: np.ndarray, up:
         bounds.append((min((low / w_lo).min(), (low / w_hi).min()), max((high / w_lo).max(), (high / w_hi).max())))
     (x0, x1), (y0, y1) = bounds
     return float(x0 * 0.5 + 0.5), float(y0 * 0.5 + 0.5), float(x1 * 0.5 + 0.5), float(y1 * 0.5 + 0.5)
+
+
+def largest_sprite_pixels(data: FrameData, view_proj: np.ndarray, pixels: float) -> float:
+    """An upper bound of the side, in pixels of a target ``pixels`` high, of the largest sprite of the frame
+    (``pixels`` times ``view_proj[1, 1]`` is the side of a sprite of half-size 1 at w = 1); inf when a sprite's end
+    lies at or behind the camera.  A trail's or a bar's sprites lie between its ends, where 1 / w is largest."""
+    ends = _sprite_ends(data, view_proj)
+    if ends is None:
+        return 0.0
+    clip, size = ends
+    w = clip[:, 3]
+    if w.min() <= 1e-6:
+        return math.inf
+    return float((size / w).max() * abs(float(view_proj[1, 1])) * pixels)
 
 
 def _grow(rect: UV, du: float, dv: float) -> UV:
@@ -155,14 +180,30 @@ class EnergyWaveFeature(RenderFeature):
         self._indices: moderngl.Buffer | None = None
         self._index_sprites = 0  # sprites the index buffer covers
         self._fullscreen: dict[str, moderngl.VertexArray] = {}
+        self._points: moderngl.VertexArray | None = None
+        # sprites as point sprites (one vertex each: llvmpipe's vertex stage and triangle setup ran 4 vertices and
+        # 2 triangles a sprite, half the sprite pass in table 4.3's case 4) unless a sprite would exceed the
+        # largest point size the driver rasterises, where the frame falls back to two triangles a sprite
+        self.point_sprites = True
+        self.max_point_size = float(renderer.ctx.info.get("GL_POINT_SIZE_RANGE", (1.0, 1.0))[1])
+        self.last_sprite_path = ""  # "points" or "quads": the last view's sprite draw (tests, profiling)
 
     # ------------------------------------------------------------------------------------------ extraction
     def extract(self, world: World) -> FrameData:
         return extract_frame(world)
 
     # ------------------------------------------------------------------------------------------- GL objects
-    def _program(self, name: str) -> moderngl.Program:
-        return self.renderer.load_program(SHADERS, name)
+    def _program(self, name: str, defines: tuple[str, ...] = ()) -> moderngl.Program:
+        return self.renderer.load_program(SHADERS, name, defines)
+
+    def _point_vao(self) -> moderngl.VertexArray:
+        """The point-sprite variant: one vertex a sprite, its square rasterised by the driver (gl_PointSize)."""
+        prog = self._program("particles", ("POINTS",))
+        if self._points is None or self._points.program is not prog:
+            if self._points is not None:
+                self._points.release()
+            self._points = self.ctx.vertex_array(prog, [])
+        return self._points
 
     def _sprite_vao(self, sprites: int) -> moderngl.VertexArray:
         """The sprites' vertex array: no attributes (corners from ``gl_VertexID``), an index buffer of two triangles
@@ -206,9 +247,23 @@ class EnergyWaveFeature(RenderFeature):
         self._records.write(staging, viewport=(0, 0, RECORDS_PER_ROW * 3, rows))
 
     # ---------------------------------------------------------------------------------------------- drawing
-    def _draw_sprites(self, view: View, data: FrameData) -> None:
-        vao = self._sprite_vao(max(e.total * max(1, e.config.trail_textures, e.config.splash_samples)
-                                   for e in data.emitters))
+    def _draw_sprites(self, view: View, data: FrameData, target_height: int) -> None:
+        """Every sprite, additively, into the bound half-resolution target ``target_height`` pixels high: as
+        point sprites (``particles.vert`` POINTS: the square of side ``gl_PointSize`` = the quad's projected side)
+        or, when one would exceed the driver's largest point, as quads of two triangles."""
+        pixels = float(target_height)
+        points = (self.point_sprites
+                  and largest_sprite_pixels(data, view.view_proj, pixels) <= self.max_point_size)
+        self.last_sprite_path = "points" if points else "quads"
+        if points:
+            vao = self._point_vao()
+            self.ctx.enable(moderngl.PROGRAM_POINT_SIZE)
+            set_uniforms(vao.program, point_scale=float(view.proj[1, 1]) * pixels)
+            primitive, per_sprite = moderngl.POINTS, 1
+        else:
+            vao = self._sprite_vao(max(e.total * max(1, e.config.trail_textures, e.config.splash_samples)
+                                       for e in data.emitters))
+            primitive, per_sprite = moderngl.TRIANGLES, len(QUAD_INDICES)
         prog = vao.program
         self._records.use(0)
         view_m = view.view.astype(np.float64)
@@ -228,8 +283,10 @@ class EnergyWaveFeature(RenderFeature):
                 count = emitter.counts[group]
                 if count:
                     set_uniforms(prog, first=first, mode=mode, sprites=sprites)
-                    vao.render(moderngl.TRIANGLES, vertices=len(QUAD_INDICES) * count * sprites)
+                    vao.render(primitive, vertices=per_sprite * count * sprites)
                 first += count
+        if points:
+            self.ctx.disable(moderngl.PROGRAM_POINT_SIZE)
 
     def add_passes(self, graph, view: View, data: FrameData) -> None:
         if data is None or not data.emitters or len(data.records) == 0:
@@ -274,7 +331,7 @@ class EnergyWaveFeature(RenderFeature):
                 fbo.use()
                 ctx.enable(moderngl.BLEND)
                 ctx.blend_func = moderngl.ONE, moderngl.ONE
-                self._draw_sprites(view, data)
+                self._draw_sprites(view, data, size[1])
             finally:
                 depth.compare_func = compare
                 ctx.depth_func = "<"
@@ -337,9 +394,9 @@ class EnergyWaveFeature(RenderFeature):
         graph.add_pass(f"energy_wave.composite.{view.name}", composite_setup, composite_execute)
 
     def release(self) -> None:
-        for obj in (self._records, self._vao, self._indices, *self._fullscreen.values()):
+        for obj in (self._records, self._vao, self._indices, self._points, *self._fullscreen.values()):
             if obj is not None:
                 obj.release()
-        self._records = self._vao = self._indices = None
+        self._records = self._vao = self._indices = self._points = None
         self._index_sprites = 0
         self._fullscreen.clear()

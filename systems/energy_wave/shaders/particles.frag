@@ -9,11 +9,16 @@
 uniform vec3 color;
 uniform vec3 core_color;
 uniform float intensity;
+#ifndef POINTS
 in vec2 v_corner;
+#endif
 in float v_alpha;
 out vec4 frag;
 
 void main() {
+#ifdef POINTS
+    vec2 v_corner = gl_PointCoord * 2.0 - 1.0;  // the point sprite's square, -1..1 (the gradient is symmetric)
+#endif
     float r2 = dot(v_corner, v_corner);
     float rim = max(1.0 - r2, 0.0);
     float e = 0.999605 + r2 * (-2.979417 + r2 * (4.258832 + r2 * (-3.428027 + r2 * 1.235257)));

@@ -253,3 +253,91 @@ def test_sprite_bounds_enclose_every_sprite_corner():
     assert (uv[:, 0] >= u0 - 1e-6).all() and (uv[:, 0] <= u1 + 1e-6).all()
     assert (uv[:, 1] >= v0 - 1e-6).all() and (uv[:, 1] <= v1 + 1e-6).all()
     assert u1 - u0 < 1.5 * np.ptp(uv[:, 0]) and v1 - v0 < 1.5 * np.ptp(uv[:, 1])  # and not much larger
+
+
+def _points_on_gpu(mode, sprites, records, point_scale, roundness=0.5, spacing=0.4, size=1.0, trail_end=0.4,
+                   view_proj=None):
+    """Run particles.vert's POINTS variant with transform feedback: each sprite's clip position and point size."""
+    import moderngl
+
+    from engine.render.renderer import _with_defines
+    from systems.energy_wave.render import RECORDS_PER_ROW, SHADERS
+    from tests.render_utils import gl_context
+
+    ctx = gl_context()
+    prog = ctx.program(vertex_shader=_with_defines((SHADERS / "particles.vert").read_text(), ("POINTS",)),
+                       varyings=["gl_Position", "gl_PointSize", "v_alpha"])
+    data = np.zeros((RECORDS_PER_ROW, 12), np.float32)
+    data[: len(records)] = records
+    tex = ctx.texture((RECORDS_PER_ROW * 3, 1), 4, data.tobytes(), dtype="f4")
+    tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+    tex.use(0)
+    values = dict(records=0, records_per_row=RECORDS_PER_ROW, first=0, sprites=sprites, mode=mode, size=size,
+                  spacing=spacing * size, roundness=roundness, trail_end=trail_end, point_scale=point_scale)
+    for name, value in values.items():
+        if name in prog:
+            prog[name].value = value
+    m = np.eye(4, dtype=np.float32) if view_proj is None else view_proj
+    prog["view_proj"].write(m.T.astype(np.float32).tobytes())
+    vao = ctx.vertex_array(prog, [])
+    out = ctx.buffer(reserve=len(records) * sprites * 6 * 4)
+    fbo = ctx.simple_framebuffer((1, 1))
+    fbo.use()
+    vao.transform(out, mode=moderngl.POINTS, vertices=len(records) * sprites)
+    result = np.frombuffer(out.read(), np.float32).reshape(len(records), sprites, 6)
+    for obj in (vao, out, fbo, tex, prog):
+        obj.release()
+    return result[..., :4], result[..., 4], result[..., 5]
+
+
+def test_point_sprites_follow_the_same_equations_as_the_quads():
+    """POINTS variant: one vertex a sprite at the quad's centre (eqs. 3.7, 3.8), point size = the quad's projected
+    side (eq. 3.9 sizes times point_scale / w); a sprite under a pixel is a one-pixel point with its area's share."""
+    q, d = np.array([1.0, 2.0, 3.0]), np.array([0.0, 0.6, 0.8])
+    for mode, n, record in ((2, 12, _record(q, direction=d, alpha=0.7)), (1, 8, _record(q, hit=(0.0, 0.0, 0.0))),
+                            (0, 1, _record(q))):
+        centres, sizes = _expand_on_gpu(mode, n, [record], roundness=0.1, spacing=0.4, size=0.5)
+        clip, points, alpha = _points_on_gpu(mode, n, [record], point_scale=20.0, roundness=0.1, spacing=0.4,
+                                             size=0.5)
+        np.testing.assert_allclose(clip[0, :, :3], centres[0], atol=1e-5)
+        np.testing.assert_allclose(points[0], 20.0 * sizes[0], atol=1e-4)  # side = 2 × half-size × 10 at w = 1
+        np.testing.assert_allclose(alpha[0], record[3])  # every side > 1 pixel: alpha untouched
+    # perspective: the side shrinks as 1 / w, as the projected quad does
+    proj = np.array([[1.5, 0, 0, 0], [0, 2.0, 0, 0], [0, 0, -1.0, -0.2], [0, 0, -1.0, 0]], np.float32)
+    clip, points, alpha = _points_on_gpu(0, 1, [_record((0.3, -0.2, -4.0))], point_scale=2.0 * 60, size=0.25,
+                                         view_proj=proj)
+    assert abs(clip[0, 0, 3] - 4.0) < 1e-6
+    assert abs(points[0, 0] - 0.25 * 2.0 * 60 / 4.0) < 1e-4  # s · P11 · H / w pixels
+    # under a pixel: side 0.4 -> a one-pixel point carrying 0.4² of the alpha
+    clip, points, alpha = _points_on_gpu(0, 1, [_record(q, alpha=0.5)], point_scale=0.8, size=0.5)
+    assert points[0, 0] == 1.0 and abs(alpha[0, 0] - 0.5 * 0.4 ** 2) < 1e-6
+
+
+def test_point_sprites_draw_the_quads_picture_and_fall_back_for_large_sprites(tmp_path):
+    from systems.energy_wave.render import largest_sprite_pixels
+    from tests.render_utils import make_renderer
+
+    pictures, paths = {}, {}
+    for name, points, limit in (("points", True, None), ("quads", False, None), ("fallback", True, 1.0)):
+        app = scene_app(tmp_path, "reference")
+        app.step(70)
+        renderer = make_renderer(app, 240, 180)
+        feature = next(f for f in renderer.features if f.name == "energy_wave")
+        feature.point_sprites = points
+        driver_limit = feature.max_point_size  # GL_POINT_SIZE_RANGE's upper end
+        if limit is not None:
+            feature.max_point_size = limit  # every sprite is larger: the frame draws quads
+        try:
+            app.render_frame()
+            pictures[name] = np.asarray(renderer.read_image(), np.int16)
+            paths[name] = feature.last_sprite_path
+            largest = largest_sprite_pixels(feature.extract(app.world), renderer.views[0].view_proj, 90)
+        finally:
+            renderer.release()
+            app.renderer = None
+    assert paths == {"points": "points", "quads": "quads", "fallback": "quads"}
+    assert 1.0 < largest < driver_limit
+    diff = np.abs(pictures["points"] - pictures["quads"])
+    assert diff.mean() < 0.05 and diff.max() <= 16  # the same squares; only rounding differs
+    assert np.array_equal(pictures["fallback"], pictures["quads"])
+    assert (pictures["quads"].mean(axis=2) > 150).sum() > 500  # the splash is there, not only the beam
