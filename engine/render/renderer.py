@@ -424,8 +424,7 @@ class Renderer:
 
     def _declare_view_targets(self, graph, view: View) -> None:
         def setup(b):
-            view.color = b.write(b.create(f"{view.name}.hdr", TextureDesc(view.width, view.height, "rgba16f")))
-            view.depth = b.write(b.create(f"{view.name}.depth", TextureDesc(view.width, view.height, "depth24")))
+            self._create_view_targets(b, view)
 
         hidden = view.extra.get("hide", ())
         background = any(f.fills_background and f.name not in hidden for f in self.features)
@@ -513,13 +512,10 @@ class Renderer:
         def setup(b):
             b.read(color)
             b.read(depth)
-            view.color = b.write(b.create(f"{view.name}.hdr", TextureDesc(view.width, view.height, "rgba16f")))
-            view.depth = b.write(b.create(f"{view.name}.depth", TextureDesc(view.width, view.height, "depth24")))
+            self._create_view_targets(b, view)
 
         def execute(pc):
-            target = self.framebuffer(pc.get(view.color), pc.get(view.depth))
-            target.use()  # its own viewport and no scissor: a blit is clipped by the scissor test
-            self.ctx.copy_framebuffer(target, self.framebuffer(pc.get(color), pc.get(depth)))
+            self._copy_layer(pc, (color, depth), (view.color, view.depth))
 
         graph.add_pass(f"static_restore.{view.name}", setup, execute)
 
@@ -534,12 +530,23 @@ class Renderer:
             b.write(depth)
 
         def execute(pc):
-            target = self.framebuffer(pc.get(color), pc.get(depth))
-            target.use()
-            self.ctx.copy_framebuffer(target, self.framebuffer(pc.get(view.color), pc.get(view.depth)))
+            self._copy_layer(pc, (view.color, view.depth), (color, depth))
             kept.key = kept.pending  # valid only once the copy is made (a frame that raised keeps nothing)
 
         graph.add_pass(f"static_store.{view.name}", setup, execute, side_effect=True)
+
+    @staticmethod
+    def _create_view_targets(b, view: View) -> None:
+        """In a pass's setup: the view's HDR colour and depth targets, created and written by that pass."""
+        view.color = b.write(b.create(f"{view.name}.hdr", TextureDesc(view.width, view.height, "rgba16f")))
+        view.depth = b.write(b.create(f"{view.name}.depth", TextureDesc(view.width, view.height, "depth24")))
+
+    def _copy_layer(self, pc, source: tuple, target: tuple) -> None:
+        """Colour and depth of ``source`` (handles) into ``target``'s: a blit of equal formats and sizes, which the
+        driver makes a memory copy."""
+        fbo = self.framebuffer(pc.get(target[0]), pc.get(target[1]))
+        fbo.use()  # its own viewport and no scissor: a blit is clipped by the scissor test
+        self.ctx.copy_framebuffer(fbo, self.framebuffer(pc.get(source[0]), pc.get(source[1])))
 
     def _free_static(self, camera: int) -> None:
         kept = self._static.pop(camera, None)
