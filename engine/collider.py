@@ -255,6 +255,12 @@ class Collider:
         march chunks and bisection iterations, each vectorized over all rays. Crossings thinner than half a cell
         may be missed.
         """
+        return self._ray_heightfield_numpy(o, d, transform, max_t, compiled=True)
+
+    def _ray_heightfield_numpy(self, o: F64, d: F64, transform: Transform, max_t: float,
+                               compiled: bool = False) -> RayHits:
+        """:meth:`_ray_heightfield` in numpy (the reference of its kernel); ``compiled``: the march and the
+        refinement per ray in :func:`_heightfield_march_kernel` instead (the same bits)."""
         field_ = self.heightfield
         n = len(o)
         (x_lo, x_hi), (z_lo, z_hi) = field_.bounds()
@@ -271,7 +277,7 @@ class Collider:
         t_hi = np.where(parallel, np.where(slab_in, np.inf, -np.inf), np.maximum(t1, t2))
         t_start = np.maximum(t_lo.max(axis=-1), 0.0)
         t_end = np.minimum(t_hi.min(axis=-1), max_t)
-        active = t_start <= t_end
+        active = (t_start <= t_end) & (d != 0.0).any(axis=-1)  # a ray without direction meets nothing it is not in
 
         def f(t: F64, rows: NDArray[np.int64]) -> F64:
             p = o[rows] + t[:, None] * d[rows]
@@ -280,6 +286,11 @@ class Collider:
         horizontal = np.hypot(d[:, 0], d[:, 2]) * np.where(active, t_end - t_start, 0.0)
         steps = int(np.ceil(np.max(horizontal, initial=0.0) / (0.5 * field_.spacing))) + 1
 
+        if compiled:
+            return _heightfield_march_kernel(
+                np.ascontiguousarray(o), np.ascontiguousarray(d), np.ascontiguousarray(t_start),
+                np.ascontiguousarray(t_end), active, steps, np.ascontiguousarray(field_.heights, dtype=np.float64),
+                float(field_.origin[0]), float(field_.origin[1]), float(field_.spacing), x_lo, x_hi, z_lo, z_hi)
         hit = np.zeros(n, dtype=bool)
         t_above, t_below = np.zeros(n), np.zeros(n)
         pending = np.flatnonzero(active)
@@ -352,6 +363,112 @@ def _refine_crossing(f, a: F64, b: F64, fa: F64, fb: F64) -> F64:
         a[live] = np.where(zero, m, a[live])
         live = live[(b[live] - a[live]) > _HEIGHTFIELD_TOLERANCE]
     return 0.5 * (a + b)
+
+
+# ------------------------------------------------------------------------------------ height-field kernel
+# _ray_heightfield's march and Illinois refinement one ray at a time, with the numpy code's float operations in its
+# order (HeightField.height_at's clip, floor and bilinear blend; the samples t_start + span * (k / steps); the
+# refinement's false position, bisection fallback and halving), so hits and t are the same bits.
+
+
+@kernel(inline="always")
+def _field_height(heights: F64, ox: float, oz: float, spacing: float, x: float, z: float) -> float:
+    """HeightField.height_at for one point."""
+    rows, cols = heights.shape
+    gx = _min(_max((x - ox) / spacing, 0.0), float(cols - 1))
+    gz = _min(_max((z - oz) / spacing, 0.0), float(rows - 1))
+    c0 = min(int(gx), cols - 2)
+    r0 = min(int(gz), rows - 2)
+    tx, tz = gx - c0, gz - r0
+    h00, h01 = heights[r0, c0], heights[r0, c0 + 1]
+    h10, h11 = heights[r0 + 1, c0], heights[r0 + 1, c0 + 1]
+    top = h00 + tx * (h01 - h00)
+    bottom = h10 + tx * (h11 - h10)
+    return top + tz * (bottom - top)
+
+
+@kernel(inline="always")
+def _ray_height_gap(o: F64, d: F64, i: int, t: float, heights: F64, ox: float, oz: float, spacing: float) -> float:
+    """f(t) = y(t) - h(x(t), z(t)) of ray i."""
+    x = o[i, 0] + t * d[i, 0]
+    y = o[i, 1] + t * d[i, 1]
+    z = o[i, 2] + t * d[i, 2]
+    return y - _field_height(heights, ox, oz, spacing, x, z)
+
+
+@kernel(inline="always")
+def _field_normal(heights: F64, ox: float, oz: float, spacing: float, x_lo: float, x_hi: float, z_lo: float,
+                  z_hi: float, x: float, z: float) -> tuple[float, float, float]:
+    """HeightField.normal_at for one point: central differences over ±spacing/2, normalised as np.linalg.norm."""
+    x, z = _min(_max(x, x_lo), x_hi), _min(_max(z, z_lo), z_hi)
+    e = 0.5 * spacing
+    xa, xb = _max(x - e, x_lo), _min(x + e, x_hi)
+    za, zb = _max(z - e, z_lo), _min(z + e, z_hi)
+    dhdx = (_field_height(heights, ox, oz, spacing, xb, z) - _field_height(heights, ox, oz, spacing, xa, z)) / (xb - xa)
+    dhdz = (_field_height(heights, ox, oz, spacing, x, zb) - _field_height(heights, ox, oz, spacing, x, za)) / (zb - za)
+    nx, nz = -dhdx, -dhdz
+    norm = np.sqrt(nx * nx + 1.0 + nz * nz)
+    return nx / norm, 1.0 / norm, nz / norm
+
+
+@kernel
+def _heightfield_march_kernel(o: F64, d: F64, t_start: F64, t_end: F64, active: NDArray[np.bool_], steps: int,
+                              heights: F64, ox: float, oz: float, spacing: float, x_lo: float, x_hi: float,
+                              z_lo: float, z_hi: float) -> tuple[NDArray[np.bool_], F64, F64]:
+    """(hit, t, local normal) of every ray: the first sign change of f over ``steps`` samples of [t_start, t_end],
+    refined, and the field's normal at the hit (0 for misses)."""
+    n = o.shape[0]
+    hit = np.zeros(n, np.bool_)
+    t_out = np.full(n, np.inf)
+    normal = np.zeros((n, 3))
+    for i in range(n):
+        if not active[i]:
+            continue
+        span = t_end[i] - t_start[i]
+        previous_t = t_start[i]
+        previous_f = _ray_height_gap(o, d, i, previous_t, heights, ox, oz, spacing)
+        found = False
+        a = b = 0.0
+        for k in range(1, steps + 1):
+            t = t_start[i] + span * (k / steps)
+            f = _ray_height_gap(o, d, i, t, heights, ox, oz, spacing)
+            if previous_f >= 0.0 and f < 0.0:
+                found, a, b = True, previous_t, t
+                break
+            previous_t, previous_f = t, f
+        if not found:
+            continue
+        hit[i] = True
+        fa = _ray_height_gap(o, d, i, a, heights, ox, oz, spacing)
+        fb = _ray_height_gap(o, d, i, b, heights, ox, oz, spacing)
+        side = 0
+        if b - a > _HEIGHTFIELD_TOLERANCE:
+            for _ in range(_HEIGHTFIELD_BISECTIONS):
+                m = a + (b - a) * fa / (fa - fb)
+                if not np.isfinite(m) or m <= a or m >= b:
+                    m = 0.5 * (a + b)
+                fm = _ray_height_gap(o, d, i, m, heights, ox, oz, spacing)
+                above = fm >= 0.0
+                repeat = (side == -1) if above else (side == 1)
+                if above:
+                    if repeat:
+                        fb = 0.5 * fb
+                    a, fa = m, fm
+                    side = -1
+                else:
+                    if repeat:
+                        fa = 0.5 * fa
+                    b, fb = m, fm
+                    side = 1
+                if abs(fm) <= _HEIGHTFIELD_TOLERANCE:
+                    a = b = m
+                if not b - a > _HEIGHTFIELD_TOLERANCE:
+                    break
+        t = 0.5 * (a + b)
+        t_out[i] = t
+        normal[i, 0], normal[i, 1], normal[i, 2] = _field_normal(
+            heights, ox, oz, spacing, x_lo, x_hi, z_lo, z_hi, o[i, 0] + t * d[i, 0], o[i, 2] + t * d[i, 2])
+    return hit, t_out, normal
 
 
 # ------------------------------------------------------------------------------------------- box kernels
