@@ -250,19 +250,25 @@ class Collider:
         """Ray march + bracketed root refinement on f(t) = y(t) - h(x(t), z(t)).
 
         Only the surface above the footprint is hit: the ray is first clipped to the field's bounding box (its
-        x/z footprint × [min h, max h]) and to [0, max_t]; that interval is sampled at most every spacing/2 of
-        horizontal travel, the first sign change of f (above → below) is bracketed, then refined (``_refine_crossing``). Loops run over
-        march chunks and bisection iterations, each vectorized over all rays. Crossings thinner than half a cell
-        may be missed.
+        x/z footprint × [min h, max h]) and to [0, max_t] (:meth:`_heightfield_interval`); that interval is sampled
+        at most every spacing/2 of horizontal travel, the first sign change of f (above → below) is bracketed,
+        then refined (Illinois false position, ``_refine_crossing``). One ray at a time in
+        :func:`_heightfield_march_kernel`; :meth:`_ray_heightfield_numpy` is the numpy reference (the same bits).
+        Crossings thinner than half a cell may be missed.
         """
-        return self._ray_heightfield_numpy(o, d, transform, max_t, compiled=True)
-
-    def _ray_heightfield_numpy(self, o: F64, d: F64, transform: Transform, max_t: float,
-                               compiled: bool = False) -> RayHits:
-        """:meth:`_ray_heightfield` in numpy (the reference of its kernel); ``compiled``: the march and the
-        refinement per ray in :func:`_heightfield_march_kernel` instead (the same bits)."""
         field_ = self.heightfield
-        n = len(o)
+        t_start, t_end, active, steps = self._heightfield_interval(o, d, max_t)
+        (x_lo, x_hi), (z_lo, z_hi) = field_.bounds()
+        return _heightfield_march_kernel(
+            np.ascontiguousarray(o), np.ascontiguousarray(d), t_start, t_end, active, steps,
+            np.ascontiguousarray(field_.heights, dtype=np.float64), float(field_.origin[0]), float(field_.origin[1]),
+            float(field_.spacing), x_lo, x_hi, z_lo, z_hi)
+
+    def _heightfield_interval(self, o: F64, d: F64, max_t: float) -> tuple[F64, F64, NDArray[np.bool_], int]:
+        """Each ray's [t_start, t_end] inside the field's bounding box and [0, max_t], whether it is non-empty
+        (and the ray has a direction), and the march's sample count (every spacing/2 of the longest horizontal
+        travel)."""
+        field_ = self.heightfield
         (x_lo, x_hi), (z_lo, z_hi) = field_.bounds()
         h_min, h_max = field_.height_range
         pad = 1e-6 * (field_.spacing + h_max - h_min)  # so a flat field still brackets its crossing
@@ -278,19 +284,21 @@ class Collider:
         t_start = np.maximum(t_lo.max(axis=-1), 0.0)
         t_end = np.minimum(t_hi.min(axis=-1), max_t)
         active = (t_start <= t_end) & (d != 0.0).any(axis=-1)  # a ray without direction meets nothing it is not in
+        horizontal = np.hypot(d[:, 0], d[:, 2]) * np.where(active, t_end - t_start, 0.0)
+        steps = int(np.ceil(np.max(horizontal, initial=0.0) / (0.5 * field_.spacing))) + 1
+        return t_start, t_end, active, steps
+
+    def _ray_heightfield_numpy(self, o: F64, d: F64, transform: Transform, max_t: float) -> RayHits:
+        """:meth:`_ray_heightfield` in numpy, loops over march chunks and refinement iterations, each vectorized
+        over all rays (the reference of its kernel)."""
+        field_ = self.heightfield
+        n = len(o)
+        t_start, t_end, active, steps = self._heightfield_interval(o, d, max_t)
 
         def f(t: F64, rows: NDArray[np.int64]) -> F64:
             p = o[rows] + t[:, None] * d[rows]
             return p[:, 1] - field_.height_at(p[:, 0], p[:, 2])
 
-        horizontal = np.hypot(d[:, 0], d[:, 2]) * np.where(active, t_end - t_start, 0.0)
-        steps = int(np.ceil(np.max(horizontal, initial=0.0) / (0.5 * field_.spacing))) + 1
-
-        if compiled:
-            return _heightfield_march_kernel(
-                np.ascontiguousarray(o), np.ascontiguousarray(d), np.ascontiguousarray(t_start),
-                np.ascontiguousarray(t_end), active, steps, np.ascontiguousarray(field_.heights, dtype=np.float64),
-                float(field_.origin[0]), float(field_.origin[1]), float(field_.spacing), x_lo, x_hi, z_lo, z_hi)
         hit = np.zeros(n, dtype=bool)
         t_above, t_below = np.zeros(n), np.zeros(n)
         pending = np.flatnonzero(active)

@@ -170,10 +170,10 @@ class Renderer:
         self._final: moderngl.Texture | None = None
         # camera entity -> (kept picture, frame index and game time it was rendered) of a view rendered every N frames
         self._held: dict[int, tuple[moderngl.Texture, int, float]] = {}
-        # camera entity -> its view's kept static layer; and the static key each camera's view had last frame
+        # camera entity -> its view's kept static layer; and what its view had last frame: the layer's key and
+        # each feature's static key
         self._static: dict[int, _StaticLayer] = {}
-        self._static_last: dict[int, tuple | None] = {}
-        self._static_features: dict[int, dict[str, Any]] = {}  # camera -> feature name -> static key last frame
+        self._static_seen: dict[int, tuple[tuple | None, dict[str, Any]]] = {}
         self.static_layer_counts = {"drawn": 0, "stored": 0, "restored": 0}  # views per outcome (tests, profiling)
         self._shader_generation = 0  # bumped by reload_shaders: kept pictures drawn with older shaders are stale
         self._final_fbo: moderngl.Framebuffer | None = None
@@ -384,9 +384,8 @@ class Renderer:
                     feature.add_passes(timed, view, data[index])
         for camera in [c for c in self._static if c not in live]:  # cameras gone
             self._free_static(camera)
-        for camera in [c for c in self._static_last if c not in live]:
-            del self._static_last[camera]
-            self._static_features.pop(camera, None)
+        for camera in [c for c in self._static_seen if c not in live]:
+            del self._static_seen[camera]
         for i, view in enumerate(self.views):
             final = self._declare_present(timed, final, view, first=i == 0)
         screen = replace(self.views[0], name="screen", width=self.width, height=self.height,
@@ -455,10 +454,13 @@ class Renderer:
         first, the sky fills the far pixels before the other opaque features cover some of them: they write
         their own colour and depth over it, so the picture is the same bits in all three cases.
         """
-        if not self.settings.static_layer_cache:
-            return None
         camera = view.camera_entity
-        before, now = self._static_features.get(camera, {}), {}
+        if not self.settings.static_layer_cache:
+            self._free_static(camera)  # switched off: the kept textures go back
+            self._static_seen.pop(camera, None)
+            return None
+        last, before = self._static_seen.get(camera, (None, {}))
+        now = {}
         static, keys = [], []
         for index, feature in features:
             if feature.phase > SKY:
@@ -470,9 +472,8 @@ class Renderer:
             if feature.name in before and before[feature.name] == key:
                 static.append((index, feature))
                 keys.append((feature.name, key))
-        self._static_features[camera] = now
         key = (self._view_key(view), tuple(keys), self._shader_generation) if static else None
-        last, self._static_last[camera] = self._static_last.get(camera), key
+        self._static_seen[camera] = (key, now)
         kept = self._static.get(camera)
         size = (view.width, view.height)
         if key is None:
@@ -652,7 +653,7 @@ class Renderer:
         self._held.clear()
         for camera in list(self._static):
             self._free_static(camera)
-        self._static_last.clear()
+        self._static_seen.clear()
         self.graph.pool.clear()
         for fbo in self._framebuffers.values():
             fbo.release()

@@ -85,12 +85,15 @@ def _sprite_ends(data: FrameData, view_proj: np.ndarray) -> tuple[np.ndarray, np
     return np.concatenate(clips), np.concatenate(sizes)
 
 
-def sprite_bounds(data: FrameData, view_proj: np.ndarray, right: np.ndarray, up: np.ndarray) -> UV | None:
+def sprite_bounds(data: FrameData, view_proj: np.ndarray, right: np.ndarray, up: np.ndarray,
+                  ends: tuple | None = ...) -> UV | None:
     """Texture-coordinate bounds of every sprite of the frame in a view; (0, 0, 1, 1) when one reaches behind the
     camera. The sprites of a trail (eq. 3.7) or a bar (eq. 3.8) lie on the segment between two end points, each
     within the camera-facing square of the emitter's largest sprite size (eq. 3.9, trail scale); the square is
-    planar and convex and projection keeps convex hulls, so the projected corners of the ends' squares bound them."""
-    ends = _sprite_ends(data, view_proj)
+    planar and convex and projection keeps convex hulls, so the projected corners of the ends' squares bound them.
+    ``ends``: :func:`_sprite_ends` of this view when the caller has it."""
+    if ends is ...:
+        ends = _sprite_ends(data, view_proj)
     if ends is None:
         return None
     clip, size = ends
@@ -110,11 +113,13 @@ def sprite_bounds(data: FrameData, view_proj: np.ndarray, right: np.ndarray, up:
     return float(x0 * 0.5 + 0.5), float(y0 * 0.5 + 0.5), float(x1 * 0.5 + 0.5), float(y1 * 0.5 + 0.5)
 
 
-def largest_sprite_pixels(data: FrameData, view_proj: np.ndarray, pixels: float) -> float:
+def largest_sprite_pixels(data: FrameData, view_proj: np.ndarray, pixels: float, ends: tuple | None = ...) -> float:
     """An upper bound of the side, in pixels of a target ``pixels`` high, of the largest sprite of the frame
     (``pixels`` times ``view_proj[1, 1]`` is the side of a sprite of half-size 1 at w = 1); inf when a sprite's end
-    lies at or behind the camera.  A trail's or a bar's sprites lie between its ends, where 1 / w is largest."""
-    ends = _sprite_ends(data, view_proj)
+    lies at or behind the camera.  A trail's or a bar's sprites lie between its ends, where 1 / w is largest.
+    ``ends``: :func:`_sprite_ends` of this view when the caller has it."""
+    if ends is ...:
+        ends = _sprite_ends(data, view_proj)
     if ends is None:
         return 0.0
     clip, size = ends
@@ -247,18 +252,17 @@ class EnergyWaveFeature(RenderFeature):
         self._records.write(staging, viewport=(0, 0, RECORDS_PER_ROW * 3, rows))
 
     # ---------------------------------------------------------------------------------------------- drawing
-    def _draw_sprites(self, view: View, data: FrameData, target_height: int) -> None:
+    def _draw_sprites(self, view: View, data: FrameData, target_height: int, largest: float) -> None:
         """Every sprite, additively, into the bound half-resolution target ``target_height`` pixels high: as
         point sprites (``particles.vert`` POINTS: the square of side ``gl_PointSize`` = the quad's projected side)
-        or, when one would exceed the driver's largest point, as quads of two triangles."""
-        pixels = float(target_height)
-        points = (self.point_sprites
-                  and largest_sprite_pixels(data, view.view_proj, pixels) <= self.max_point_size)
+        or, when the ``largest`` sprite (:func:`largest_sprite_pixels`) would exceed the driver's largest point, as
+        quads of two triangles."""
+        points = self.point_sprites and largest <= self.max_point_size
         self.last_sprite_path = "points" if points else "quads"
         if points:
             vao = self._point_vao()
             self.ctx.enable(moderngl.PROGRAM_POINT_SIZE)
-            set_uniforms(vao.program, point_scale=float(view.proj[1, 1]) * pixels)
+            set_uniforms(vao.program, point_scale=float(view.proj[1, 1]) * target_height)
             primitive, per_sprite = moderngl.POINTS, 1
         else:
             vao = self._sprite_vao(max(e.total * max(1, e.config.trail_textures, e.config.splash_samples)
@@ -297,7 +301,9 @@ class EnergyWaveFeature(RenderFeature):
         glow = max(e.config.glow for e in data.emitters)
         radius = max(e.config.glow_radius for e in data.emitters)
         view_m = view.view.astype(np.float64)
-        bounds = sprite_bounds(data, view.view_proj, view_m[0, :3], view_m[1, :3])
+        ends = _sprite_ends(data, view.view_proj)  # shared by the bounds and the point-size check
+        bounds = sprite_bounds(data, view.view_proj, view_m[0, :3], view_m[1, :3], ends)
+        largest = largest_sprite_pixels(data, view.view_proj, size[1], ends)
         rects = pass_rects(bounds, size, glow_size, radius, glow > 0.0)
         if 0 in pixel_rect(rects["composite"], view.width, view.height)[2:]:
             return  # every sprite and its glow off screen: nothing reaches the image
@@ -331,7 +337,7 @@ class EnergyWaveFeature(RenderFeature):
                 fbo.use()
                 ctx.enable(moderngl.BLEND)
                 ctx.blend_func = moderngl.ONE, moderngl.ONE
-                self._draw_sprites(view, data, size[1])
+                self._draw_sprites(view, data, size[1], largest)
             finally:
                 depth.compare_func = compare
                 ctx.depth_func = "<"

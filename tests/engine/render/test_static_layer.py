@@ -86,7 +86,7 @@ def test_moving_meshes_stay_out_of_the_layer_and_still_meshes_join_it():
         app.step(1)
         app.render_frame()
         meshes = next(f for f in renderer.features if f.name == "meshes")
-        assert renderer._static_features[renderer.views[0].camera_entity]["meshes"] is not None
+        assert renderer._static_seen[renderer.views[0].camera_entity][1]["meshes"] is not None
         for _ in range(4):  # the crate spins every tick: its key changes, so it is never part of the layer
             app.step(1)
             app.render_frame()
@@ -117,6 +117,10 @@ def test_layer_follows_a_resize_and_is_freed_with_its_camera():
             outcomes.append(renderer.views[0].extra["static_layer"])
         assert outcomes == ["drawn", "stored", "restored", "restored"]
         assert renderer._static[camera].size == (80, 48)
+        app.config.render.static_layer_cache = False  # switched off: the kept textures are released
+        app.render_frame()
+        assert camera not in renderer._static and "static_layer" not in renderer.views[0].extra
+        app.config.render.static_layer_cache = True
         app.world.despawn(camera)
         app.render_frame()  # the default view (no camera entity) takes over; the old layer is released
         assert camera not in renderer._static
