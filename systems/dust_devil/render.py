@@ -531,6 +531,11 @@ class DustDevilMarkers(RenderFeature):
             rows.append(inst)
         return np.concatenate(rows) if rows else np.zeros((0, self.INSTANCE_FLOATS), np.float32)
 
+    def static_key(self, view: View, data: np.ndarray) -> Any:
+        """The spheres' matrices and colours: unchanged while the field box is not dragged, so a still camera
+        copies them back with the terrain and the sky (the renderer's static layer) instead of drawing them."""
+        return data.tobytes()
+
     def _vao(self, count: int) -> tuple[moderngl.VertexArray, moderngl.Buffer]:
         needed = max(count, 9) * self.INSTANCE_FLOATS * 4
         if self._gl is None or self._gl[1].size < needed:

@@ -170,3 +170,39 @@ def test_rendering_does_not_change_the_simulation(tmp_path, gl_ctx):
     plain.step(4)
     render_app(drawn, 64, 48, frames=4)
     assert plain.state_hash() == drawn.state_hash()
+
+
+def test_markers_join_the_static_layer_while_the_field_stays_and_the_pictures_keep_their_bits(tmp_path, gl_ctx):
+    """With a still camera the red spheres are copied back with the terrain and the sky; a drag moves them out
+    of the layer for that frame.  Every picture is the same bits as with [render] static_layer_cache off."""
+    def run(cache: bool):
+        app = app_for(tmp_path, name=f"markers_{cache}", particle_count=200, prewarm_time=0.2, marker_radius=1.5)
+        app.config.render.static_layer_cache = cache
+        renderer = make_renderer(app, 96, 72)
+        entity, *_ = devil(app)
+        pictures, markers_drawn = [], []
+        try:
+            for frame in range(8):
+                if frame == 4:
+                    app.registry.command("dust_devil.drag")(app.world, entity, delta=(2.0, 0.0, 1.0))
+                app.step(1)
+                renderer.extract(app.world)
+                graph = renderer.declare()
+                markers_drawn.append(any(p.startswith("dust_devil_markers.") for p in graph.compile().order))
+                graph.execute()
+                renderer.frame_index += 1
+                pictures.append(np.asarray(renderer.read_image()))
+        finally:
+            renderer.release()
+            app.renderer = None
+        return pictures, markers_drawn
+
+    cached, drawn = run(True)
+    plain, always = run(False)
+    assert always == [True] * 8
+    # kept from frame 3; the drag at frame 4 moves them out of the layer, which is stored again at frame 6
+    assert drawn == [True, True, True, False, True, True, True, False]
+    for a, b in zip(cached, plain):
+        assert np.array_equal(a, b)
+    red = (cached[-1][..., 0].astype(int) - cached[-1][..., 1]) > 80
+    assert red.sum() > 4  # the markers are in the picture
