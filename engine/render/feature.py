@@ -72,6 +72,16 @@ class View:
         return self.view_proj.T.astype(np.float32).tobytes()
 
 
+def write_view_color(b, view: View, region: tuple[int, int, int, int] | None) -> None:
+    """In a pass's setup: declare a write of ``view``'s colour (``view.color`` becomes the new version) that
+    changes at most the pixels of ``region`` (x, y, width, height in the view's pixels, as a scissor box; None:
+    anywhere).  The renderer then tone-maps only those pixels of a view whose static layer was restored, and
+    copies the rest from the layer's tone-mapped picture (Renderer._partial_present).  A pass that writes the
+    colour with a plain ``b.write(view.color)`` is fine too: the whole view is tone-mapped then."""
+    view.color = b.write(view.color)
+    view.extra.setdefault("color_regions", []).append(None if region is None else tuple(int(v) for v in region))
+
+
 class RenderFeature:
     """Base class of a plugin's render passes; GL objects are created lazily and released in ``release``."""
 

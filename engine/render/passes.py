@@ -445,26 +445,43 @@ def _fullscreen(renderer: Renderer, frag: str) -> moderngl.VertexArray:
     return vao
 
 
-def tonemap_execute(renderer: Renderer, pc, view: View, ldr_handle) -> None:
-    """Tone-map a view's HDR colour at the view's own size into an 8-bit display-referred target."""
+def tonemap_execute(renderer: Renderer, pc, view: View, ldr_handle, source=None) -> None:
+    """Tone-map a view's HDR colour (or ``source``'s, of the view's size) at the view's own size into an 8-bit
+    display-referred target."""
     fbo = renderer.framebuffer(pc.get(ldr_handle))
     fbo.use()
     renderer.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
     fbo.viewport = (0, 0, view.width, view.height)
     vao = _fullscreen(renderer, "tonemap.frag")
-    pc.get(view.color).use(0)
+    pc.get(view.color if source is None else source).use(0)
     set_uniforms(vao.program, hdr=0, exposure=renderer.settings.exposure, origin=(0, 0))
     vao.render(moderngl.TRIANGLES, vertices=3)
 
 
-def present_execute(renderer: Renderer, pc, view: View, final_handle, first: bool, ldr_handle=None) -> None:
+def present_execute(renderer: Renderer, pc, view: View, final_handle, first: bool, ldr_handle=None,
+                    kept=None) -> None:
     """Put a view into its rectangle of the window image (with a frame when partial): tone-map its HDR
     colour there, or, when it was already tone-mapped at a smaller size (``ldr_handle``), upscale it
-    bilinearly."""
+    bilinearly.  ``kept`` = (handle, (x, y, w, h)): a view presented whole over its restored static layer
+    (Renderer._partial_present) copies the layer's tone-mapped picture (a memory copy) and tone-maps only
+    that rectangle, where passes wrote over the layer."""
     ctx = renderer.ctx
     fbo = renderer.framebuffer(pc.get(final_handle))
     fbo.use()
     ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
+    if kept is not None:
+        handle, (rx, ry, rw, rh) = kept
+        ctx.copy_framebuffer(fbo, renderer.framebuffer(pc.get(handle)))
+        if rw > 0 and rh > 0:
+            vao = _fullscreen(renderer, "tonemap.frag")
+            pc.get(view.color).use(0)
+            set_uniforms(vao.program, hdr=0, exposure=renderer.settings.exposure, origin=(0, 0))
+            fbo.scissor = (rx, ry, rw, rh)
+            try:
+                vao.render(moderngl.TRIANGLES, vertices=3)
+            finally:
+                fbo.scissor = None
+        return
     x, y, w, h = view.extra["rect"]
     full = (x, y, w, h) == (0, 0, renderer.width, renderer.height)
     if first and not full:

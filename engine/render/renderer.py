@@ -119,6 +119,8 @@ class _StaticLayer:
     depth: moderngl.Texture
     key: tuple | None = None  # set once the copy into the textures is made
     pending: tuple | None = None  # the key of the layer being stored this frame
+    ldr: moderngl.Texture | None = None  # the layer tone-mapped (views presented at full size, see _partial_present)
+    ldr_key: tuple | None = None  # (layer key, exposure) it was tone-mapped with
 
     @property
     def size(self) -> tuple[int, int]:
@@ -374,6 +376,8 @@ class Renderer:
                 self._declare_view_targets(timed, view)
             elif view.extra["static_layer"] == "restored":
                 self._declare_static_restore(timed, view)
+                # what the passes after the copy write into the view's colour, and where (write_view_color)
+                view.extra["color_regions"], view.extra["restored_version"] = [], view.color.version
             else:  # "stored": the static features first, then a copy of what they drew into the kept layer
                 self._declare_view_targets(timed, view)
                 for index, feature in static:
@@ -524,10 +528,12 @@ class Renderer:
         color, depth = self._static_layer_resources(graph, view)
         kept = self._static[view.camera_entity]
 
+        stored = {}
+
         def setup(b):
             b.read(view.color)
             b.read(view.depth)
-            b.write(color)
+            stored["color"] = b.write(color)
             b.write(depth)
 
         def execute(pc):
@@ -535,6 +541,56 @@ class Renderer:
             kept.key = kept.pending  # valid only once the copy is made (a frame that raised keeps nothing)
 
         graph.add_pass(f"static_store.{view.name}", setup, execute, side_effect=True)
+        if not self._presented_whole(view):
+            return
+        if kept.ldr is None:
+            kept.ldr = self._make_resource(TextureDesc(view.width, view.height, "rgba8"))
+        ldr = graph.import_resource(f"{view.name}.static_ldr", kept.ldr, TextureDesc(view.width, view.height, "rgba8"))
+        exposure = self.settings.exposure
+
+        def tonemap_setup(b):
+            b.read(stored["color"])
+            stored["ldr"] = b.write(ldr)
+
+        def tonemap(pc):
+            from engine.render.passes import tonemap_execute
+
+            kept.ldr_key = None
+            tonemap_execute(self, pc, view, stored["ldr"], source=stored["color"])
+            kept.ldr_key = (kept.key, exposure)
+
+        graph.add_pass(f"static_tonemap.{view.name}", tonemap_setup, tonemap, side_effect=True)
+
+    def _presented_whole(self, view: View) -> bool:
+        """Whether ``view`` is tone-mapped straight into the whole window image (one view at full scale, drawn
+        every frame): the case :meth:`_partial_present` serves."""
+        return (view.extra.get("held") is None and view.extra["rect"] == (0, 0, self.width, self.height)
+                and (view.width, view.height) == (self.width, self.height))
+
+    def _partial_present(self, view: View) -> tuple[int, int, int, int] | None:
+        """The rectangle of ``view`` (pixels: x, y, width, height; possibly empty) that its present has to tone-map
+        this frame, the rest being copied from its static layer's tone-mapped picture; None to tone-map it all.
+
+        Only for a restored static layer (its pixels are the kept ones, bit for bit, until a pass writes over
+        them) whose picture was tone-mapped with this exposure, in a view presented whole, and only when every
+        pass that wrote the view's colour after the copy said where (:func:`engine.render.feature.write_view_color`):
+        the union of those regions bounds every pixel that can differ from the kept picture.  A write without a
+        region (``b.write(view.color)``) leaves the count short and the whole view is tone-mapped, as before.
+        """
+        if view.extra.get("static_layer") != "restored" or not self._presented_whole(view):
+            return None
+        kept = self._static.get(view.camera_entity)
+        if kept is None or kept.ldr is None or kept.ldr_key != (kept.key, self.settings.exposure):
+            return None
+        regions = view.extra.get("color_regions", [])
+        if len(regions) != view.color.version - view.extra["restored_version"] or any(r is None for r in regions):
+            return None
+        boxes = [(x, y, x + w, y + h) for x, y, w, h in regions if w > 0 and h > 0]
+        if not boxes:
+            return (0, 0, 0, 0)
+        x0, y0 = max(min(b[0] for b in boxes), 0), max(min(b[1] for b in boxes), 0)
+        x1, y1 = min(max(b[2] for b in boxes), view.width), min(max(b[3] for b in boxes), view.height)
+        return (x0, y0, max(x1 - x0, 0), max(y1 - y0, 0))
 
     @staticmethod
     def _create_view_targets(b, view: View) -> None:
@@ -554,6 +610,8 @@ class Renderer:
         if kept is not None:
             self._free_resource(kept.color)
             self._free_resource(kept.depth)
+            if kept.ldr is not None:
+                self._free_resource(kept.ldr)
 
     HELD_MAX_AGE = 0.25  # seconds of game time a kept picture may lag behind the world
 
@@ -621,13 +679,23 @@ class Renderer:
                            lambda pc: tonemap_execute(self, pc, view, out["ldr"]))
             source = None
 
+        region = self._partial_present(view) if source is not None else None
+        view.extra["present_region"] = region  # tests, profiling: None when the whole view was tone-mapped
+        kept_ldr = None
+        if region is not None:  # the kept picture copied, the rest tone-mapped (see _partial_present)
+            kept_ldr = graph.import_resource(f"{view.name}.static_ldr", self._static[view.camera_entity].ldr,
+                                             TextureDesc(view.width, view.height, "rgba8"))
+
         def setup(b):
             b.read(view.color if source is not None else out["ldr"])
+            if kept_ldr is not None:
+                b.read(kept_ldr)
             out["final"] = b.write(final)
 
         graph.add_pass(f"present.{view.name}", setup,
                        lambda pc: present_execute(self, pc, view, out["final"], first,
-                                                  None if source is not None else out["ldr"]))
+                                                  None if source is not None else out["ldr"],
+                                                  kept=None if kept_ldr is None else (kept_ldr, region)))
         return out["final"]
 
     # ----------------------------------------------------------------- pictures

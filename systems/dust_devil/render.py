@@ -45,7 +45,7 @@ import moderngl
 import numpy as np
 
 from components.dust_devil import DustDevilConfig, DustDevilState
-from engine.render.feature import OPAQUE, TRANSPARENT, RenderFeature, View
+from engine.render.feature import OPAQUE, TRANSPARENT, RenderFeature, View, write_view_color
 from engine.render.graph import TextureDesc
 from engine.render.passes import SHADERS as ENGINE_SHADERS
 from engine.render.passes import lighting_uniforms, opaque_setup, primitive, set_uniforms
@@ -391,7 +391,7 @@ class DustDevilParticles(RenderFeature):
 
         def resolve_setup(b):
             h["cov"] = b.write(h["cov"])  # reads the words and zeroes them (image loads and stores)
-            view.color = b.write(view.color)
+            write_view_color(b, view, rect if rect is not None else (0, 0, 0, 0))  # its scissor
 
         def resolve(pc):
             if rect is None:
@@ -533,8 +533,9 @@ class DustDevilMarkers(RenderFeature):
 
     def static_key(self, view: View, data: np.ndarray) -> Any:
         """The spheres' matrices and colours: unchanged while the field box is not dragged, so a still camera
-        copies them back with the terrain and the sky (the renderer's static layer) instead of drawing them."""
-        return data.tobytes()
+        copies them back with the terrain and the sky (the renderer's static layer) instead of drawing them.
+        None when there are none (no passes either)."""
+        return data.tobytes() if len(data) else None
 
     def _vao(self, count: int) -> tuple[moderngl.VertexArray, moderngl.Buffer]:
         needed = max(count, 9) * self.INSTANCE_FLOATS * 4

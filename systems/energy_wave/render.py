@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING
 import moderngl
 import numpy as np
 
-from engine.render.feature import TRANSPARENT, RenderFeature, View
+from engine.render.feature import TRANSPARENT, RenderFeature, View, write_view_color
 from engine.render.graph import TextureDesc
 from engine.render.passes import set_uniforms
 
@@ -373,7 +373,7 @@ class EnergyWaveFeature(RenderFeature):
             b.read(h["particles"])
             if glow > 0.0:
                 b.read(h["blur_y"])
-            view.color = b.write(view.color)
+            write_view_color(b, view, pixel_rect(rects["composite"], view.width, view.height))  # its scissor
 
         def composite_execute(pc):
             fbo = self.renderer.framebuffer(pc.get(view.color))

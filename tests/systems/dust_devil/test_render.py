@@ -173,14 +173,15 @@ def test_rendering_does_not_change_the_simulation(tmp_path, gl_ctx):
 
 
 def test_markers_join_the_static_layer_while_the_field_stays_and_the_pictures_keep_their_bits(tmp_path, gl_ctx):
-    """With a still camera the red spheres are copied back with the terrain and the sky; a drag moves them out
-    of the layer for that frame.  Every picture is the same bits as with [render] static_layer_cache off."""
+    """With a still camera the red spheres are copied back with the terrain and the sky, and the present
+    tone-maps only the dust cloud's rectangle over the layer's kept picture; a drag moves the spheres out of the
+    layer for a while.  Every picture is the same bits as with [render] static_layer_cache off."""
     def run(cache: bool):
         app = app_for(tmp_path, name=f"markers_{cache}", particle_count=200, prewarm_time=0.2, marker_radius=1.5)
         app.config.render.static_layer_cache = cache
         renderer = make_renderer(app, 96, 72)
         entity, *_ = devil(app)
-        pictures, markers_drawn = [], []
+        pictures, markers_drawn, regions = [], [], []
         try:
             for frame in range(8):
                 if frame == 4:
@@ -192,13 +193,18 @@ def test_markers_join_the_static_layer_while_the_field_stays_and_the_pictures_ke
                 graph.execute()
                 renderer.frame_index += 1
                 pictures.append(np.asarray(renderer.read_image()))
+                regions.append(renderer.views[0].extra["present_region"])
         finally:
             renderer.release()
             app.renderer = None
-        return pictures, markers_drawn
+        return pictures, markers_drawn, regions
 
-    cached, drawn = run(True)
-    plain, always = run(False)
+    cached, drawn, regions = run(True)
+    plain, always, whole = run(False)
+    assert whole == [None] * 8
+    # restored frames tone-map only the dust cloud's rectangle (the resolve's scissor) over the kept picture
+    assert [r is not None for r in regions] == [not d for d in drawn]
+    assert all(0 < r[2] * r[3] < 96 * 72 for r in regions if r is not None)
     assert always == [True] * 8
     # kept from frame 3; the drag at frame 4 moves them out of the layer, which is stored again at frame 6
     assert drawn == [True, True, True, False, True, True, True, False]

@@ -341,3 +341,35 @@ def test_point_sprites_draw_the_quads_picture_and_fall_back_for_large_sprites(tm
     assert diff.mean() < 0.05 and diff.max() <= 16  # the same squares; only rounding differs
     assert np.array_equal(pictures["fallback"], pictures["quads"])
     assert (pictures["quads"].mean(axis=2) > 150).sum() > 500  # the splash is there, not only the beam
+
+
+def test_over_a_kept_static_layer_only_the_waves_rectangle_is_tone_mapped_and_the_bits_stay(tmp_path):
+    """A still camera: the wall and the sky come back from the renderer's static layer, and the present copies
+    that layer's tone-mapped picture and tone-maps only the composite's rectangle (where the wave and its glow
+    can be).  Every frame is the same bits as with [render] static_layer_cache off."""
+    from tests.render_utils import make_renderer
+
+    def run(cache: bool):
+        app = scene_app(tmp_path, "reference")
+        app.config.render.static_layer_cache = cache
+        app.step(40)
+        renderer = make_renderer(app, 160, 120)
+        pictures, regions = [], []
+        try:
+            for _ in range(6):
+                app.step(1)
+                app.render_frame()
+                pictures.append(np.asarray(renderer.read_image()))
+                regions.append(renderer.views[0].extra["present_region"])
+        finally:
+            renderer.release()
+            app.renderer = None
+        return pictures, regions
+
+    cached, regions = run(True)
+    plain, whole = run(False)
+    assert whole == [None] * 6
+    assert regions[:3] == [None] * 3 and all(r is not None for r in regions[3:])  # drawn, drawn, stored, restored
+    assert all(0 < r[2] * r[3] < 160 * 120 for r in regions[3:])
+    for a, b in zip(cached, plain):
+        assert np.array_equal(a, b)
