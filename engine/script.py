@@ -102,6 +102,14 @@ class ScriptContext:
     def tick(self) -> int:
         return self.world.tick
 
+    @property
+    def window_size(self) -> tuple[int, int]:
+        """The window's (or the headless target's) size in pixels, as the renderer draws it; the scene's
+        ``[render]`` size when nothing renders.  Mouse positions are pixels of it, origin bottom-left."""
+        from engine.render.components import window_size  # no GL: the size only
+
+        return window_size(self.world)
+
     def call(self, command: str, **kwargs: Any) -> Any:
         """Run a command a plugin published (for example ``"energy_wave.fire"``)."""
         registry = self.world.resource(ScriptRuntime).registry

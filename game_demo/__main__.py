@@ -64,7 +64,7 @@ def autoplay(app: App, args: argparse.Namespace) -> int:
     from game_demo.scripts.common import GameState
 
     size = tuple(args.size) if args.size else (app.config.render.width, app.config.render.height)
-    pilot = AutoPilot(window=size)
+    pilot = AutoPilot()  # mouse positions in the engine's window: the renderer's size, or the scene's without one
     app.pre_tick.append(pilot)
     renderer = None
     if not args.no_render:
@@ -100,7 +100,7 @@ def play_window(app: App, args: argparse.Namespace) -> int:
     if args.autoplay:
         from game_demo.autoplay import AutoPilot
 
-        app.pre_tick.append(AutoPilot(window=(app.config.render.width, app.config.render.height)))
+        app.pre_tick.append(AutoPilot())
     size = tuple(args.size) if args.size else (app.config.render.width, app.config.render.height)
     _run_window(app, size, None, None, None, False)
     return 0

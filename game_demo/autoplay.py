@@ -17,26 +17,42 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from engine.app import App
 from engine.input import InputEvent, InputQueue
-from engine.render.components import Camera, camera_matrices
+from engine.render.components import Camera, camera_matrices, window_size
 from engine.spatial import Transform
 from game_demo.scripts.common import GameState, Target, find_named_world
 
 
+def player_params(world):
+    """The ``demo.player`` script's parameters as the scene configured them (look sensitivity, fire cooldown):
+    the autoplay aims and fires with the same numbers the player script applies to its input."""
+    from engine.script import Scripts
+
+    player = find_named_world(world, "player")
+    scripts = None if player is None else world.try_get(player, Scripts)
+    for slot in (scripts.slots if scripts is not None else []):
+        if slot.name == "demo.player":
+            return slot.script.params
+    return None
+
+
 @dataclass
 class AutoPilot:
-    look_sensitivity: float = 0.25  # must match the player's Params (degrees per pixel)
     fire_range: float = 34.0
     danger_radius: float = 10.0
     drag_distance: float = 22.0
     max_turn_px: float = 60.0
-    window: tuple[int, int] = (960, 540)
+    window: tuple[int, int] | None = None  # pixels; None: the engine's window size (the renderer's when one is
+    # attached, else the scene's [render] size), the one the dust devil's drag turns pixels back into metres with
     holding: set[str] = field(default_factory=set)
     drag_plan: list[list[InputEvent]] = field(default_factory=list)
     fire_cooldown: int = 0
     mouse: tuple[float, float] = (480.0, 270.0)
     drags: int = 0
     shots: int = 0
+    look_sensitivity: float = 0.25  # degrees per pixel, and ticks between shots: the player script's, read each
+    fire_ticks: int = 20  # tick from its Params (these defaults only serve a scene without the player script)
 
     def __call__(self, app) -> None:
         queue = app.world.resource(InputQueue)
@@ -76,6 +92,10 @@ class AutoPilot:
         if self.drag_plan:
             out.extend(self.drag_plan.pop(0))
             return out
+        params = player_params(world)
+        if params is not None:
+            self.look_sensitivity = params.look_sensitivity
+            self.fire_ticks = math.ceil(params.fire_cooldown / world.resource(App).dt - 1e-9) + 1  # + 1: rounding
         p = world.get(player, Transform)
         devil = find_named_world(world, "dust_devil")
         if devil is not None:
@@ -115,7 +135,7 @@ class AutoPilot:
             self._release("space", out)
         elif abs(math.degrees(err_yaw)) < 2.5 and dist < self.fire_range and self.fire_cooldown == 0:
             self._press("space", out)
-            self.fire_cooldown = 20
+            self.fire_cooldown = self.fire_ticks
             self.shots += 1
 
     def _plan_drag(self, world, player_pos, devil_pos, out: list[InputEvent]) -> bool:
@@ -152,7 +172,8 @@ class AutoPilot:
     def _to_pixels(self, world, camera_entity: int, point) -> tuple[float, float] | None:
         """Window pixel (origin bottom-left) of a world point seen by a camera, or None when outside."""
         view, proj, (x, y, pw, ph) = camera_matrices(world.get(camera_entity, Camera),
-                                                      world.get(camera_entity, Transform), self.window)
+                                                      world.get(camera_entity, Transform),
+                                                      self.window or window_size(world))
         clip = proj @ view @ np.array([point[0], point[1], point[2], 1.0])
         ndc = clip[:3] / clip[3]
         if np.any(np.abs(ndc[:2]) > 0.98):

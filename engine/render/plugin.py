@@ -7,7 +7,8 @@ Nothing here imports GL: the renderer is created by the front end (window or hea
 from __future__ import annotations
 
 from engine.registry import Registry
-from engine.render.components import CameraConfig, Hud, MeshConfig, build_camera, camera_controllers
+from engine.config import validate
+from engine.render.components import Camera, CameraConfig, Hud, MeshConfig, build_camera, camera_controllers
 from engine.schedule import Stage
 from engine.world import World
 
@@ -40,7 +41,10 @@ def _mesh_command(world: World, entity: int, **values) -> MeshConfig:
     return MeshConfig.model_validate(values)
 
 
-def _set_hud(world: World, entity: int, lines=None, center=None, help=None, show_help=None) -> None:
+def _set_hud(world: World, entity: int, lines=None, center=None, help=None, show_help=None,
+             show_fps=None) -> None:
+    """``ctx.call("render.hud", lines=[...], center="...", help=[...], show_help=True, show_fps=True)``: set the
+    HUD's fields that are given (the others stay)."""
     hud = world.resource(Hud)
     if lines is not None:
         hud.lines = list(lines)
@@ -50,6 +54,20 @@ def _set_hud(world: World, entity: int, lines=None, center=None, help=None, show
         hud.help = list(help)
     if show_help is not None:
         hud.show_help = bool(show_help)
+    if show_fps is not None:
+        hud.show_fps = bool(show_fps)
+
+
+def _camera_command(world: World, entity: int, camera: int | None = None, **values) -> CameraConfig:
+    """``ctx.call("render.camera", camera=other, viewport=(x, y, w, h), update_interval=2)``: change fields of a
+    Camera's config (the caller's own camera when ``camera`` is omitted), validated like the scene's TOML: a bad
+    value raises a ConfigError naming the field and keeps the camera as it was.  Returns the new config."""
+    target = entity if camera is None else int(camera)
+    cam = world.get(target, Camera)
+    merged = cam.config.model_dump(mode="json", warnings=False) | {k: list(v) if isinstance(v, tuple) else v for k, v in values.items()}
+    config = validate(CameraConfig, merged, file=f"render.camera (entity {target})")
+    cam.config = config
+    return config
 
 
 class RenderPlugin:
@@ -63,6 +81,7 @@ class RenderPlugin:
         registry.add_system(draw_system, Stage.RENDER, name="render.draw")
         registry.add_command("render.mesh", _mesh_command)
         registry.add_command("render.hud", _set_hud)
+        registry.add_command("render.camera", _camera_command)
         registry.on_world(lambda world: world.insert_resource(Hud()))
 
 

@@ -18,7 +18,8 @@ class DustDevilChaser(Script):
         player: str = Field("player", description="Name of the player entity.")
 
     def on_update(self, dt: float) -> None:
-        if game_state(self.ctx).phase != "playing":
+        state = game_state(self.ctx)
+        if state.phase != "playing" or state.paused:  # scripts run while paused (menus): the threat waits
             return
         player = find_named(self.ctx, self.params.player)
         if player is None:

@@ -57,11 +57,11 @@ def ground_height(ctx, x: float, z: float) -> float:
     return 0.0 if height is None else height
 
 
-def terrain_extent(ctx) -> float:
-    """Half the terrain's side length in metres (the playable area), or 50."""
+def terrain_extent(ctx, without_terrain: float) -> float:
+    """Half the terrain's side length in metres (the playable area), or ``without_terrain``."""
     for _, (terrain,) in ctx.query(Terrain):
         return float(min(terrain.field.size)) / 2.0
-    return 50.0
+    return without_terrain
 
 
 def find_named_world(world, name: str) -> int | None:

@@ -9,7 +9,6 @@ import numpy as np
 from pydantic import Field
 
 from engine.config import ConfigModel, Vec4
-from engine.render.components import Camera
 from engine.script import Script, script
 from engine.spatial import Transform, quat_from_euler, quat_rotate
 from game_demo.scripts.common import PATTERNS, find_named, game_state, ground_height, terrain_extent
@@ -34,10 +33,20 @@ class Player(Script):
                                                          "half the rate saves ~a fifth of the frame on a software "
                                                          "rasteriser); the split screen's top view every frame.")
         start_yaw: float = Field(0.0, ge=-360.0, le=360.0, description="Initial heading in degrees.")
+        start_pitch: float = Field(-4.0, ge=-89.0, le=89.0, description="Initial pitch in degrees (negative: down).")
+        pitch_min: float = Field(-60.0, ge=-89.0, le=0.0, description="Lowest look pitch in degrees.")
+        pitch_max: float = Field(40.0, ge=0.0, le=89.0, description="Highest look pitch in degrees.")
+        edge_margin: float = Field(2.0, ge=0.0, le=100.0,
+                                   description="Metres kept between the player and the terrain's edge.")
+        camera_look_down: float = Field(8.0, ge=-45.0, le=45.0,
+                                        description="Degrees the follow camera looks below the player's aim.")
+        area_half_size: float = Field(50.0, gt=0.0, le=10000.0,
+                                      description="Half the side of the playable square (metres) when the scene "
+                                                  "has no terrain (with one, the terrain's extent).")
 
     def on_start(self) -> None:
         self.yaw = math.radians(self.params.start_yaw)
-        self.pitch = math.radians(-4.0)
+        self.pitch = math.radians(self.params.start_pitch)
         self.cooldown = 0.0
         state = game_state(self.ctx)
         state.top_view = "minimap"
@@ -57,8 +66,7 @@ class Player(Script):
         top_interval = self.params.minimap_update_interval if state.top_view == "minimap" else 1
         for entity, rect, interval in ((main, main_rect, 1), (top, top_rect, top_interval)):
             if entity is not None:
-                cam = self.ctx.world.get(entity, Camera)
-                cam.config = cam.config.model_copy(update={"viewport": tuple(rect), "update_interval": interval})
+                self.ctx.call("render.camera", camera=entity, viewport=tuple(rect), update_interval=interval)
 
     # -------------------------------------------------------------- update
     def on_update(self, dt: float) -> None:
@@ -78,13 +86,13 @@ class Player(Script):
             dx, dy = inp.mouse_delta
             self.yaw -= math.radians(dx * self.params.look_sensitivity)
             self.pitch = float(np.clip(self.pitch + math.radians(dy * self.params.look_sensitivity),
-                                       math.radians(-60), math.radians(40)))
+                                       math.radians(self.params.pitch_min), math.radians(self.params.pitch_max)))
         t = self.ctx.get(Transform)
         move = np.array([inp.is_down("d") - inp.is_down("a"), 0.0, inp.is_down("s") - inp.is_down("w")], float)
         if move.any():
             heading = quat_from_euler(self.yaw, 0.0, 0.0)
             step = quat_rotate(heading, move / np.linalg.norm(move)) * self.params.move_speed * dt
-            limit = terrain_extent(self.ctx) - 2.0
+            limit = max(terrain_extent(self.ctx, self.params.area_half_size) - self.params.edge_margin, 0.0)
             t.position[0] = float(np.clip(t.position[0] + step[0], -limit, limit))
             t.position[2] = float(np.clip(t.position[2] + step[2], -limit, limit))
         t.position[1] = ground_height(self.ctx, t.position[0], t.position[2]) + self.params.eye_height
@@ -97,12 +105,7 @@ class Player(Script):
         self._follow_camera()
 
     def _mouse_in_top_view(self) -> bool:
-        from engine.app import App
-
-        app = self.ctx.resource(App)
-        renderer = app.renderer
-        w, h = (renderer.width, renderer.height) if renderer is not None else (app.config.render.width,
-                                                                                 app.config.render.height)
+        w, h = self.ctx.window_size
         x, y, rw, rh = self._top_rect()
         mx, my = self.ctx.input.mouse
         return x * w <= mx <= (x + rw) * w and y * h <= my <= (y + rh) * h
@@ -113,7 +116,7 @@ class Player(Script):
             return
         t = self.ctx.get(Transform)
         ct = self.ctx.world.get(cam, Transform)
-        look = quat_from_euler(self.yaw, self.pitch - math.radians(8.0), 0.0)
+        look = quat_from_euler(self.yaw, self.pitch - math.radians(self.params.camera_look_down), 0.0)
         back = quat_rotate(look, np.array([0.0, 0.0, 1.0]))
         ct.position = t.position + back * self.params.camera_distance + np.array([0.0, self.params.camera_height, 0.0])
         ct.rotation = look

@@ -34,8 +34,7 @@ class GameRules(Script):
         state.phase = "playing"
         state.time_left = self.params.time_limit
         state.paused = False
-        self.ctx.call("render.hud", help=HELP, show_help=False)
-        self.ctx.resource(Hud).show_fps = True
+        self.ctx.call("render.hud", help=HELP, show_help=False, show_fps=True)
 
     def on_update(self, dt: float) -> None:
         state = game_state(self.ctx)
@@ -43,8 +42,7 @@ class GameRules(Script):
         if inp.was_pressed("r"):
             self.ctx.call("engine.restart")
         if inp.was_pressed("f1"):
-            hud = self.ctx.resource(Hud)
-            hud.show_help = not hud.show_help
+            self.ctx.call("render.hud", show_help=not self.ctx.resource(Hud).show_help)
         if inp.was_pressed("escape") and state.phase == "playing":
             state.paused = self.ctx.call("engine.pause")
         targets = len(self.ctx.query(Target))

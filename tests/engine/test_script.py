@@ -130,3 +130,32 @@ def test_schedule_print_order(capsys):
     assert main(["run", "configs/scenes/sandbox.toml", "--print-schedule"]) == 0
     out = capsys.readouterr().out
     assert out.index("core.input") < out.index("core.scripts") < out.index("render.draw")
+
+
+def test_render_commands_and_the_window_size_from_scripts(tmp_path):
+    """render.camera changes another camera's config, validated like the TOML (a bad value names the field and
+    keeps the camera); render.hud sets only the fields given; ctx.window_size is the scene's size without a
+    renderer."""
+    from engine.config import ConfigError
+    from engine.render.components import Camera, Hud
+    from engine.script import ScriptContext
+
+    scene = tmp_path / "cams.toml"
+    scene.write_text('[scene]\nplugins = ["render"]\n[render]\nwidth = 320\nheight = 200\n'
+                     '[[entities]]\nname = "cam"\n[entities.components.Transform]\n[entities.components.Camera]\n',
+                     encoding="utf-8")
+    app = App(scene)
+    cam = next(e for e, _ in app.world.query(Camera))
+    other = app.world.spawn()
+    ctx = ScriptContext(app.world, other, "test")
+    assert ctx.window_size == (320, 200)
+    config = ctx.call("render.camera", camera=cam, viewport=(0.5, 0.0, 0.5, 1.0), update_interval=3)
+    assert app.world.get(cam, Camera).config is config
+    assert config.viewport == (0.5, 0.0, 0.5, 1.0) and config.update_interval == 3
+    with pytest.raises(ConfigError, match="update_interval"):
+        ctx.call("render.camera", camera=cam, update_interval=0, viewport=(0.0, 0.0, 1.0, 1.0))
+    assert app.world.get(cam, Camera).config is config  # unchanged
+    ctx.call("render.hud", lines=["a"], show_fps=True)
+    ctx.call("render.hud", show_help=True)
+    hud = app.world.resource(Hud)
+    assert hud.lines == ["a"] and hud.show_fps and hud.show_help

@@ -32,16 +32,21 @@ def test_demo_scene_and_its_presets_validate():
     validate_file(ROOT / "configs" / "prefabs" / "smoke_puff.toml", registry)
 
 
-def test_autoplay_wins_with_the_same_hash_in_two_processes():
-    cmd = [sys.executable, "-m", "game_demo", "--no-render", "--autoplay", "--seed", "42", "--max-seconds", "90"]
+def test_autoplay_wins_with_the_same_hash_in_two_processes(tmp_path):
+    """The issue's command, ``python -m game_demo --headless --autoplay --seed S`` (screenshots of the run), and the
+    same run without rendering, in two processes: both win and print the same state hash last (rendering reads
+    the world only, and the autoplay's mouse works in the same window size)."""
+    base = [sys.executable, "-m", "game_demo", "--autoplay", "--seed", "42", "--max-seconds", "90"]
+    cmds = [base + ["--headless", "--screenshots", str(tmp_path / "shots")], base + ["--no-render"]]
     procs = [subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
-             for _ in range(2)]
+             for cmd in cmds]
     outs = [p.communicate(timeout=600) for p in procs]
     for proc, (out, err) in zip(procs, outs):
         assert proc.returncode == 0, f"autoplay did not win:\n{err[-2000:]}"
         assert "won" in err
     hashes = [out.strip().splitlines()[-1] for out, _ in outs]
     assert hashes[0] == hashes[1] and len(hashes[0]) == 32
+    assert len(list((tmp_path / "shots").glob("frame_*.png"))) >= 1  # the headless run's screenshots
 
 
 def _played(ticks: int) -> App:
@@ -93,3 +98,22 @@ def test_dragging_the_dust_devil_with_injected_mouse_events_moves_it():
     chase = 3.0 * 6 * app.dt  # the chaser script's own drift over these ticks, at most
     assert np.hypot(moved[0] + 12.0, moved[2] - 8.0) < 0.5 + chase
     assert world.resource(GameState).phase == "playing"
+
+
+def test_pause_stops_the_timer_and_the_dust_devil():
+    """Esc pauses the game: the timer and the dust devil's drift towards the player both wait (scripts still run
+    while the simulation is paused)."""
+    app = App(SCENE)
+    app.step(10)
+    world = app.world
+    devil = find_named_world(world, "dust_devil")
+    queue = world.resource(InputQueue)
+    queue.push(InputEvent("key_down", "escape"))
+    queue.push(InputEvent("key_up", "escape"))
+    app.step(1)
+    state = world.resource(GameState)
+    assert state.paused
+    before, time_left = world.get(devil, Transform).position.copy(), state.time_left
+    app.step(60)
+    assert state.time_left == time_left
+    assert np.array_equal(world.get(devil, Transform).position, before)
