@@ -167,8 +167,9 @@ class FieldGpu:
         self.band_tex: moderngl.Texture | None = None
         self.band_fbo: moderngl.Framebuffer | None = None
         self.band_bakes = 0  # viewer cells whose 12 images were captured
-        self._band_eye: np.ndarray | None = None  # the viewer's last (x, z): the direction it moves in
-        self._band_level: int | None = None  # the eye-height step in use (see _band_key)
+        # per viewer (a view's name; each camera moves and holds its height step on its own):
+        self._band_eyes: dict = {}  # the viewer's last (x, z): the direction it moves in
+        self._band_levels: dict = {}  # the eye-height step in use (see _band_key)
         self.band_buf = ctx.buffer(reserve=N_BAND_SIDES * 6 * 5 * 4)
         self._band_content: dict[int, np.ndarray] = {}
         self.draw_calls = 0  # draw calls of the last draw() (bakes excluded)
@@ -348,32 +349,33 @@ class FieldGpu:
         return len(cells)
 
     # ------------------------------------------------------------------------------------ level 5 (band)
-    def _band_key(self, cell: int, eye_y: float) -> tuple[int, int]:
+    def _band_key(self, cell: int, eye_y: float, viewer=None) -> tuple[int, int]:
         """(cell, eye height above the cell in steps of half a plant height).  The step in use is kept until the
         eye is three quarters of a step away from it (hysteresis: an eye hovering at a step boundary, as a
-        camera following a walker does, would otherwise re-bake the band at every crossing)."""
+        camera following a walker does, would otherwise re-bake the band at every crossing); per ``viewer``."""
         ground = float(self.data.placed.cell_centre[cell, 1])
         step = max(0.5 * self.data.plant_height, 1e-6)
         level = (eye_y - ground) / step
-        last = self._band_level
+        last = self._band_levels.get(viewer)
         if last is None or abs(level - last) > 0.75:
-            last = self._band_level = int(np.floor(level + 0.5))
+            last = self._band_levels[viewer] = int(np.floor(level + 0.5))
         return cell, last
 
-    def ensure_band(self, cell: int, camera: CameraInput, prefetch: int = 1) -> _BandEntry:
+    def ensure_band(self, cell: int, camera: CameraInput, prefetch: int = 1, viewer=None) -> _BandEntry:
         """The band images of ``cell`` (baked now if missing), and up to ``prefetch`` neighbours baked ahead:
         those the viewer is heading for (ahead of its motion since the last frame, nearest the heading first),
         so a walk bakes about one cell per cell crossed instead of every neighbour it passes; none while it
-        stands still."""
-        key = self._band_key(cell, float(camera.position[1]))
+        stands still.  ``viewer``: whose motion and height step these are (a view's name)."""
+        key = self._band_key(cell, float(camera.position[1]), viewer)
         entry = self.band_entries.get(key)
         if entry is None:
             entry = self._bake_band(key, camera)
         self.band_entries.move_to_end(key)
         placed = self.data.placed
         eye = np.asarray(camera.position, dtype=np.float64)[[0, 2]]
-        motion = np.zeros(2) if self._band_eye is None else eye - self._band_eye
-        self._band_eye = eye
+        last_eye = self._band_eyes.get(viewer)
+        motion = np.zeros(2) if last_eye is None else eye - last_eye
+        self._band_eyes[viewer] = eye
         col, row = cell % placed.grid_x, cell // placed.grid_x
         around = [r * placed.grid_x + c for r in range(row - 1, row + 2) for c in range(col - 1, col + 2)
                   if 0 <= r < placed.grid_z and 0 <= c < placed.grid_x and (r, c) != (row, col)]
@@ -507,15 +509,15 @@ class FieldGpu:
         return 6 * len(quads)
 
     # ---------------------------------------------------------------------------------------- drawing
-    def prepare(self, plan: FramePlan, camera: CameraInput) -> None:
+    def prepare(self, plan: FramePlan, camera: CameraInput, viewer=None) -> None:
         """Bake what this frame needs and is not cached yet (the LOD cache; the viewer cell's band)."""
         if len(plan.impostor_cells) or plan.band_cell is not None:
             self.ensure_impostors()
         if plan.band_cell is not None:
-            self.ensure_band(plan.band_cell, camera)
+            self.ensure_band(plan.band_cell, camera, viewer=viewer)
 
     def draw(self, fbo: moderngl.Framebuffer, plan: FramePlan, view: View, camera: CameraInput,
-             debug: bool) -> None:
+             debug: bool, viewer=None) -> None:
         """Draw the plan into ``fbo`` (the view's colour + depth): a handful of instanced draw calls."""
         ctx = self.ctx
         self.draw_calls = 0
@@ -529,7 +531,7 @@ class FieldGpu:
                                               plan.impostor_blend, 4)
         band_vertices = 0
         if plan.band_cell is not None and plan.band_sides.any():
-            entry = self.band_entries[self._band_key(plan.band_cell, float(camera.position[1]))]
+            entry = self.band_entries[self._band_key(plan.band_cell, float(camera.position[1]), viewer)]
             band_vertices = self._band_quads(entry, plan.band_sides & entry.content)
         # levels 0-3: one plant list (each level's plants nearest first, for early depth rejection), one draw
         # per level and primitive type
@@ -627,9 +629,9 @@ class GrassFieldFeature(RenderFeature):
             self.plans[(frame.entity, view.name)] = plan
 
             def execute(pc, gpu=gpu, plan=plan, camera=camera, debug=frame.debug):
-                gpu.prepare(plan, camera)
+                gpu.prepare(plan, camera, viewer=view.name)
                 fbo = self.renderer.framebuffer(pc.get(view.color), pc.get(view.depth))
-                gpu.draw(fbo, plan, view, camera, debug)
+                gpu.draw(fbo, plan, view, camera, debug, viewer=view.name)
 
             graph.add_pass(f"grass_field.{frame.entity}.{view.name}", opaque_setup(view), execute)
 

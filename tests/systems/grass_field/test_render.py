@@ -116,7 +116,8 @@ def test_bands_are_prefetched_ahead_of_the_viewer_and_the_height_step_has_hyster
                                forward=np.array([1.0, 0.0, 0.0]), fov_x=1.0, width=96)
 
         gpu.band_entries.clear()
-        gpu._band_eye, gpu._band_level = None, None
+        gpu._band_eyes.clear()
+        gpu._band_levels.clear()
         gpu.ensure_band(cell, at(base[0], base[2]))
         gpu.ensure_band(cell, at(base[0], base[2]))  # standing still: nothing baked ahead
         assert [k[0] for k in gpu.band_entries] == [cell]
@@ -125,10 +126,21 @@ def test_bands_are_prefetched_ahead_of_the_viewer_and_the_height_step_has_hyster
         assert [k[0] for k in gpu.band_entries] == [cell + 1, cell]
         # the eye bobbing a fifth of a step around a step boundary keeps the step in use: no re-bake
         bakes, half = gpu.band_bakes, 0.5 * gpu.data.plant_height
-        level = gpu._band_level
+        level = gpu._band_levels[None]
         for dy in (0.2, -0.2, 0.2, -0.2):
             gpu.ensure_band(cell, at(base[0] + 0.1 * step, base[2], base[1] + (level + 0.5) * half + dy * half))
         assert gpu.band_bakes == bakes
+        # two still views in one cell, apart and three height steps apart, drawn alternately: each keeps its own
+        # step and its own last position, so after their first bakes nothing more is baked (sharing them, each
+        # frame would see the viewer jump between the two and bake neighbours "ahead" of that jump)
+        high = base[1] + (level + 3.0) * half
+        gpu.ensure_band(cell, at(base[0] + 0.1 * step, base[2]))
+        gpu.ensure_band(cell, at(base[0] - 0.3 * step, base[2] + 0.2 * step, high), viewer="high")
+        bakes = gpu.band_bakes
+        for _ in range(3):
+            gpu.ensure_band(cell, at(base[0] + 0.1 * step, base[2]))
+            gpu.ensure_band(cell, at(base[0] - 0.3 * step, base[2] + 0.2 * step, high), viewer="high")
+        assert gpu.band_bakes == bakes and gpu._band_levels["high"] == gpu._band_levels[None] + 3
     finally:
         renderer.release()
         app.renderer = None
