@@ -33,10 +33,7 @@ height = {height}
 name = "desert"
 [entities.components.Transform]
 [entities.components.Terrain]
-size_exponent = 6      # 65 x 65 points = 64 x 64 polygons at spacing 2 (the paper: 63 x 63)
-spacing = 2.0
-amplitude = 6.0
-roughness = 0.5
+preset = "terrain/dust_devil_desert"   # 65 x 65 points = 64 x 64 polygons at spacing 2 (the paper: 63 x 63)
 [[entities]]
 name = "dust_devil"
 [entities.components.Transform]

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import AfterValidator, Field, ValidationInfo, field_validator
+from pydantic import AfterValidator, Field, field_validator
 
 from engine.config import Color3, ConfigModel, _as_tuple
 from engine.registry import BuildContext
@@ -89,7 +89,9 @@ class DustDevilConfig(ConfigModel):
     repeats: int = Field(16, ge=1, le=64,
                          description="R: ensemble images averaged per frame (paper: 16 per time step).")
     drag_repeats: int = Field(4, ge=1, le=64,
-                              description="R while the field is being dragged (cheaper frames while moving).")
+                              description="R while the field is being dragged (cheaper frames while moving), at "
+                                          "most `repeats`: a larger value (a preset's default over a scene's "
+                                          "smaller `repeats`) keeps R at `repeats` while dragging.")
     point_size: float = Field(2.0, ge=1.0, le=32.0, description="Point size in pixels.")
     color: Color3 = Field((0.86, 0.70, 0.47), description="Sand colour (linear RGB).")
     show_markers: bool = Field(True,
@@ -108,13 +110,10 @@ class DustDevilConfig(ConfigModel):
             raise ValueError(f"min {value[0]} must not exceed max {value[1]}")
         return value
 
-    @field_validator("drag_repeats")
-    @classmethod
-    def _drag_repeats_drop(cls, value: int, info: ValidationInfo) -> int:
-        repeats = info.data.get("repeats")
-        if repeats is not None and value > repeats:
-            raise ValueError(f"must not exceed repeats ({repeats}): R drops while dragging")
-        return value
+    @property
+    def dragging_repeats(self) -> int:
+        """R while the field is dragged: ``drag_repeats``, never more than ``repeats`` (R only drops)."""
+        return min(self.drag_repeats, self.repeats)
 
 
 @dataclass

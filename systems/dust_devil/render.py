@@ -28,7 +28,7 @@ Two implementations of the same ensemble (same pseudo-particles, same coverage c
   (rgb += colour, a += 1) with the depth test GL_LESS, which counts a pixel once per repeat;
   ``pbvr_resolve`` divides by R and composites.
 
-R is ``repeats``, or ``drag_repeats`` while the field is being dragged.  With PBVR off the real particles are
+R is ``repeats``, or ``drag_repeats`` (at most ``repeats``) while the field is being dragged.  With PBVR off the real particles are
 drawn as opaque points instead.  The markers (red spheres at the box's 8 corners and centre) are lit instanced
 spheres drawn with the engine's mesh shader.
 """
@@ -68,7 +68,7 @@ class DevilFrame:
     color: tuple[float, float, float]
     pbvr: bool
     sub_particles: int  # K
-    repeats: int  # R this frame (drag_repeats while dragging)
+    repeats: int  # R this frame (DustDevilConfig.dragging_repeats while dragging)
     radius: float
     point_size: float
     dragging: bool
@@ -81,7 +81,7 @@ def extract_devils(world) -> list[DevilFrame]:
             continue
         dragging = state.dragging(world.tick)
         out.append(DevilFrame(entity, world_positions(state, t).astype(np.float32), tuple(cfg.color), cfg.pbvr,
-                              cfg.sub_particles, cfg.drag_repeats if dragging else cfg.repeats,
+                              cfg.sub_particles, cfg.dragging_repeats if dragging else cfg.repeats,
                               cfg.sub_particle_radius, cfg.point_size, dragging))
     return out
 

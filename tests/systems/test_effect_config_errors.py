@@ -35,7 +35,6 @@ CASES = [
     ("RigidBody", 'shape = "box"\nhalf_extents = [0.0, 1.0, 1.0]', "", None, "half_extents must be in (0, 10000]"),
     ("DustDevil", "particle_count = 10000000", "particle_count", 10000000, "less than or equal to 200000"),
     ("DustDevil", "grid_resolution = [2, 32, 32]", "grid_resolution[0]", 2, "greater than or equal to 4"),
-    ("DustDevil", "repeats = 4\ndrag_repeats = 8", "drag_repeats", 8, "must not exceed repeats"),
     ("Terrain", "size_exponent = 40", "size_exponent", 40, "less than or equal to 11"),
     ("Terrain", "spacing = 0.0", "spacing", 0.0, "greater than 0"),
     ("Terrain", "colors = [[inf, 0.0, 0.0], [0.0, 0.0, 0.0]]", "colors[0][0]", math.inf, "finite number"),

@@ -74,6 +74,26 @@ def test_angle_range_must_be_ordered():
     assert "rotation_angle_range" in _error({"rotation_angle_range": [30.0, 10.0]})
 
 
-def test_drag_repeats_cannot_exceed_repeats():
-    text = _error({"repeats": 4, "drag_repeats": 8})
-    assert "drag_repeats: must not exceed repeats (4)" in text
+def test_r_only_drops_while_dragging():
+    """drag_repeats caps R while dragging: a larger value (the default 4, or a preset's, over a smaller repeats)
+    keeps R at repeats instead of raising it."""
+    from components.dust_devil import DustDevilConfig
+
+    assert DustDevilConfig(repeats=2).dragging_repeats == 2
+    assert DustDevilConfig(repeats=4, drag_repeats=8).dragging_repeats == 4
+    assert DustDevilConfig(repeats=16, drag_repeats=3).dragging_repeats == 3
+
+
+def test_the_papers_terrain_is_a_terrain_preset_at_the_papers_spacing(registry):
+    """terrain/dust_devil_desert: midpoint displacement at grid spacing 2, 64 x 64 polygons (the paper's 63 x 63
+    rounded to 2^n + 1 points per side); the showcase uses it."""
+    from engine.app import App
+    from engine.builtin import Terrain
+
+    preset = ROOT / "configs/effects/terrain/dust_devil_desert.toml"
+    assert preset.read_text(encoding="utf-8").startswith("#:schema ../../schema/Terrain.schema.json")
+    validate_file(preset, registry)
+    app = App(SHOWCASE)
+    (terrain,) = [t for _, (t,) in app.world.query(Terrain)]
+    assert terrain.field.heights.shape == (65, 65) and terrain.field.spacing == 2.0
+    assert str(preset) in map(str, app.plan.files)
