@@ -20,21 +20,21 @@ import numpy as np
 from engine.app import App
 from engine.input import InputEvent, InputQueue
 from engine.render.components import Camera, camera_matrices, window_size
+from engine.script import Scripts
 from engine.spatial import Transform
 from game_demo.scripts.common import GameState, Target, find_named_world
+from game_demo.scripts.player import Player
 
 
-def player_params(world):
-    """The ``demo.player`` script's parameters as the scene configured them (look sensitivity, fire cooldown):
-    the autoplay aims and fires with the same numbers the player script applies to its input."""
-    from engine.script import Scripts
-
+def player_params(world) -> Player.Params:
+    """The ``demo.player`` script's parameters as the scene configured them (its defaults without the script):
+    the autoplay aims and fires with the look sensitivity and fire cooldown the player script applies."""
     player = find_named_world(world, "player")
     scripts = None if player is None else world.try_get(player, Scripts)
     for slot in (scripts.slots if scripts is not None else []):
-        if slot.name == "demo.player":
+        if slot.name == Player.script_name:
             return slot.script.params
-    return None
+    return Player.Params()
 
 
 @dataclass
@@ -51,8 +51,6 @@ class AutoPilot:
     mouse: tuple[float, float] = (480.0, 270.0)
     drags: int = 0
     shots: int = 0
-    look_sensitivity: float = 0.25  # degrees per pixel, and ticks between shots: the player script's, read each
-    fire_ticks: int = 20  # tick from its Params (these defaults only serve a scene without the player script)
 
     def __call__(self, app) -> None:
         queue = app.world.resource(InputQueue)
@@ -92,10 +90,6 @@ class AutoPilot:
         if self.drag_plan:
             out.extend(self.drag_plan.pop(0))
             return out
-        params = player_params(world)
-        if params is not None:
-            self.look_sensitivity = params.look_sensitivity
-            self.fire_ticks = math.ceil(params.fire_cooldown / world.resource(App).dt - 1e-9) + 1  # + 1: rounding
         p = world.get(player, Transform)
         devil = find_named_world(world, "dust_devil")
         if devil is not None:
@@ -108,6 +102,8 @@ class AutoPilot:
         return out
 
     def _hunt(self, world, p: Transform, out: list[InputEvent]) -> None:
+        params = player_params(world)
+        sensitivity = params.look_sensitivity  # degrees per pixel
         targets = [(e, world.get(e, Transform).position) for e, _ in world.query(Target)]
         if not targets:
             self._release("w", out)
@@ -122,8 +118,8 @@ class AutoPilot:
         want_pitch = math.atan2(goal[1] - pos[1], dist)
         err_yaw = (want_yaw - yaw + math.pi) % (2 * math.pi) - math.pi
         err_pitch = want_pitch - pitch
-        px = float(np.clip(-math.degrees(err_yaw) / self.look_sensitivity, -self.max_turn_px, self.max_turn_px))
-        py = float(np.clip(math.degrees(err_pitch) / self.look_sensitivity, -self.max_turn_px, self.max_turn_px))
+        px = float(np.clip(-math.degrees(err_yaw) / sensitivity, -self.max_turn_px, self.max_turn_px))
+        py = float(np.clip(math.degrees(err_pitch) / sensitivity, -self.max_turn_px, self.max_turn_px))
         if abs(px) > 0.01 or abs(py) > 0.01:
             self._turn(px, py, out)
         if dist > self.fire_range * 0.8:
@@ -135,7 +131,8 @@ class AutoPilot:
             self._release("space", out)
         elif abs(math.degrees(err_yaw)) < 2.5 and dist < self.fire_range and self.fire_cooldown == 0:
             self._press("space", out)
-            self.fire_cooldown = self.fire_ticks
+            # the player's cooldown in ticks, + 1 for its float countdown's rounding
+            self.fire_cooldown = math.ceil(params.fire_cooldown / world.resource(App).dt - 1e-9) + 1
             self.shots += 1
 
     def _plan_drag(self, world, player_pos, devil_pos, out: list[InputEvent]) -> bool:

@@ -445,6 +445,15 @@ def _fullscreen(renderer: Renderer, frag: str) -> moderngl.VertexArray:
     return vao
 
 
+def _tonemap_draw(renderer: Renderer, hdr: moderngl.Texture, origin: tuple[int, int]) -> None:
+    """tonemap.frag over the bound target's viewport (and scissor): one HDR texel per pixel, ``origin`` being
+    the pixel of texel (0, 0)."""
+    vao = _fullscreen(renderer, "tonemap.frag")
+    hdr.use(0)
+    set_uniforms(vao.program, hdr=0, exposure=renderer.settings.exposure, origin=origin)
+    vao.render(moderngl.TRIANGLES, vertices=3)
+
+
 def tonemap_execute(renderer: Renderer, pc, view: View, ldr_handle, source=None) -> None:
     """Tone-map a view's HDR colour (or ``source``'s, of the view's size) at the view's own size into an 8-bit
     display-referred target."""
@@ -452,10 +461,7 @@ def tonemap_execute(renderer: Renderer, pc, view: View, ldr_handle, source=None)
     fbo.use()
     renderer.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
     fbo.viewport = (0, 0, view.width, view.height)
-    vao = _fullscreen(renderer, "tonemap.frag")
-    pc.get(view.color if source is None else source).use(0)
-    set_uniforms(vao.program, hdr=0, exposure=renderer.settings.exposure, origin=(0, 0))
-    vao.render(moderngl.TRIANGLES, vertices=3)
+    _tonemap_draw(renderer, pc.get(view.color if source is None else source), (0, 0))
 
 
 def present_execute(renderer: Renderer, pc, view: View, final_handle, first: bool, ldr_handle=None,
@@ -473,12 +479,9 @@ def present_execute(renderer: Renderer, pc, view: View, final_handle, first: boo
         handle, (rx, ry, rw, rh) = kept
         ctx.copy_framebuffer(fbo, renderer.framebuffer(pc.get(handle)))
         if rw > 0 and rh > 0:
-            vao = _fullscreen(renderer, "tonemap.frag")
-            pc.get(view.color).use(0)
-            set_uniforms(vao.program, hdr=0, exposure=renderer.settings.exposure, origin=(0, 0))
             fbo.scissor = (rx, ry, rw, rh)
             try:
-                vao.render(moderngl.TRIANGLES, vertices=3)
+                _tonemap_draw(renderer, pc.get(view.color), (0, 0))
             finally:
                 fbo.scissor = None
         return
@@ -490,14 +493,12 @@ def present_execute(renderer: Renderer, pc, view: View, final_handle, first: boo
         fbo.clear(*view.extra["border"], 1.0, viewport=(x - 2, y - 2, w + 4, h + 4))
     fbo.viewport = (x, y, w, h)
     if ldr_handle is None:
-        vao = _fullscreen(renderer, "tonemap.frag")  # the view's size is the rectangle's: one texel per pixel
-        pc.get(view.color).use(0)
-        set_uniforms(vao.program, hdr=0, exposure=renderer.settings.exposure, origin=(x, y))
+        _tonemap_draw(renderer, pc.get(view.color), (x, y))  # the view's size is the rectangle's
     else:
         vao = _fullscreen(renderer, "upscale.frag")
         pc.get(ldr_handle).use(0)
         set_uniforms(vao.program, image=0)
-    vao.render(moderngl.TRIANGLES, vertices=3)
+        vao.render(moderngl.TRIANGLES, vertices=3)
     fbo.viewport = (0, 0, renderer.width, renderer.height)
 
 

@@ -64,7 +64,8 @@ def _camera_command(world: World, entity: int, camera: int | None = None, **valu
     value raises a ConfigError naming the field and keeps the camera as it was.  Returns the new config."""
     target = entity if camera is None else int(camera)
     cam = world.get(target, Camera)
-    merged = cam.config.model_dump(mode="json", warnings=False) | {k: list(v) if isinstance(v, tuple) else v for k, v in values.items()}
+    changes = {k: list(v) if isinstance(v, tuple) else v for k, v in values.items()}
+    merged = cam.config.model_dump(mode="json", warnings=False) | changes
     config = validate(CameraConfig, merged, file=f"render.camera (entity {target})")
     cam.config = config
     return config
