@@ -82,6 +82,40 @@ def write_view_color(b, view: View, region: tuple[int, int, int, int] | None) ->
     view.extra.setdefault("color_regions", []).append(None if region is None else tuple(int(v) for v in region))
 
 
+@dataclass(eq=False)
+class ColorLayer:
+    """Light a pass adds to a view's HDR colour: ``colour += matrix · texture`` inside ``region``, the texture (a
+    graph handle) sampled bilinearly at the view's texture coordinates (a smaller buffer upsampled: off-screen
+    particles with their bloom).  ``matrix`` (3 × 3, its columns multiply the texture's channels) turns the
+    channels into colour (the identity for an RGB buffer).
+
+    Declared with :func:`add_color_layer` in the setup of the pass that adds it.  When no later pass writes the
+    view's colour, the renderer applies the layer in the view's tone map instead (post-processing stacks fold
+    their bloom into the tone map the same way) and sets ``folded``: the pass's execute then draws nothing.
+    On a software rasteriser that saves a read-modify-write of the HDR target over the region."""
+
+    texture: Any
+    matrix: np.ndarray
+    region: tuple[int, int, int, int]
+    folded: bool = False
+
+    def uniforms(self) -> dict[str, Any]:
+        """``layer_matrix`` as a mat3 uniform (column-major)."""
+        m = np.asarray(self.matrix, np.float64).reshape(3, 3)
+        return dict(layer_matrix=tuple(float(v) for v in m.T.ravel()))
+
+
+def add_color_layer(b, view: View, layer: ColorLayer) -> ColorLayer:
+    """In a pass's setup: declare that the pass adds ``layer`` to ``view``'s colour (a read of its texture and a
+    write of the colour in its region, :func:`write_view_color`).  The pass's execute draws it unless the
+    renderer folded it into the tone map (``layer.folded``, known when the frame executes)."""
+    b.read(layer.texture)
+    layer.folded = False
+    write_view_color(b, view, layer.region)
+    view.extra["color_layer"] = (layer, view.color)  # foldable while the colour stays at this version
+    return layer
+
+
 class RenderFeature:
     """Base class of a plugin's render passes; GL objects are created lazily and released in ``release``."""
 

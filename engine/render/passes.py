@@ -16,7 +16,7 @@ import numpy as np
 
 from engine.builtin import Terrain
 from engine.render.components import Hud, MeshConfig
-from engine.render.feature import OPAQUE, OVERLAY, SKY, RenderFeature, View
+from engine.render.feature import OPAQUE, OVERLAY, SKY, ColorLayer, RenderFeature, View
 from engine.render.terrain import TerrainChunks, build_terrain_chunks, draw_ranges, select_levels, shade_texels
 from engine.spatial import Transform, cross, model_matrices
 
@@ -433,44 +433,76 @@ class MeshFeature(RenderFeature):
 
 
 # ----------------------------------------------------------- tone map, composite
-def _fullscreen(renderer: Renderer, frag: str) -> moderngl.VertexArray:
-    from engine.render.renderer import shader_source
+def _fullscreen(renderer: Renderer, frag: str, defines: tuple[str, ...] = ()) -> moderngl.VertexArray:
+    from engine.render.renderer import _with_defines, shader_source
 
     cache = renderer.__dict__.setdefault("_fullscreen_vaos", {})
-    vao = cache.get(frag)
+    vao = cache.get((frag, defines))
     if vao is None:
-        prog = renderer.program(shader_source(SHADERS / "fullscreen.vert"), shader_source(SHADERS / frag))
+        prog = renderer.program(shader_source(SHADERS / "fullscreen.vert"),
+                                _with_defines(shader_source(SHADERS / frag), defines))
         vao = renderer.ctx.vertex_array(prog, [])
-        cache[frag] = vao
+        cache[(frag, defines)] = vao
     return vao
 
 
-def _tonemap_draw(renderer: Renderer, hdr: moderngl.Texture, origin: tuple[int, int]) -> None:
+def _tonemap_draw(renderer: Renderer, hdr: moderngl.Texture, origin: tuple[int, int], pc=None,
+                  layer: ColorLayer | None = None, size: tuple[int, int] = (0, 0)) -> None:
     """tonemap.frag over the bound target's viewport (and scissor): one HDR texel per pixel, ``origin`` being
-    the pixel of texel (0, 0)."""
+    the pixel of texel (0, 0).  ``layer``: a colour layer folded into the tone map (the view's ``size``; ``pc``
+    resolves its textures): its region is tone-mapped by the ADD_LAYER variant, and the rest (up to four
+    rectangles around it) by the plain one, so no pixel is tone-mapped twice."""
+    ctx = renderer.ctx
     vao = _fullscreen(renderer, "tonemap.frag")
     hdr.use(0)
     set_uniforms(vao.program, hdr=0, exposure=renderer.settings.exposure, origin=origin)
-    vao.render(moderngl.TRIANGLES, vertices=3)
+    if layer is None:
+        vao.render(moderngl.TRIANGLES, vertices=3)
+        return
+    outer = ctx.scissor  # the caller's (a partial present's rectangle), or None: the viewport
+    ox, oy, ow, oh = outer if outer is not None else ctx.viewport
+    rx, ry, rw, rh = layer.region
+    x0, y0 = max(rx + origin[0], ox), max(ry + origin[1], oy)
+    x1, y1 = min(rx + origin[0] + rw, ox + ow), min(ry + origin[1] + rh, oy + oh)
+    if x1 <= x0 or y1 <= y0:
+        vao.render(moderngl.TRIANGLES, vertices=3)
+        return
+    around = [(ox, oy, ow, y0 - oy), (ox, y1, ow, oy + oh - y1), (ox, y0, x0 - ox, y1 - y0),
+              (x1, y0, ox + ow - x1, y1 - y0)]  # below, above, left, right of the layer's box
+    try:
+        for box in around:
+            if box[2] > 0 and box[3] > 0:
+                ctx.scissor = box
+                vao.render(moderngl.TRIANGLES, vertices=3)
+        added = _fullscreen(renderer, "tonemap.frag", ("ADD_LAYER",))
+        pc.get(layer.texture).use(1)
+        set_uniforms(added.program, hdr=0, layer=1, exposure=renderer.settings.exposure,
+                     origin=origin, view_size=(float(size[0]), float(size[1])), **layer.uniforms())
+        ctx.scissor = (x0, y0, x1 - x0, y1 - y0)
+        added.render(moderngl.TRIANGLES, vertices=3)
+    finally:
+        ctx.scissor = outer
 
 
-def tonemap_execute(renderer: Renderer, pc, view: View, ldr_handle, source=None) -> None:
+def tonemap_execute(renderer: Renderer, pc, view: View, ldr_handle, source=None,
+                    layer: ColorLayer | None = None) -> None:
     """Tone-map a view's HDR colour (or ``source``'s, of the view's size) at the view's own size into an 8-bit
-    display-referred target."""
+    display-referred target; ``layer``: a colour layer folded in (Renderer._fold_layer)."""
     fbo = renderer.framebuffer(pc.get(ldr_handle))
     fbo.use()
     renderer.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
     fbo.viewport = (0, 0, view.width, view.height)
-    _tonemap_draw(renderer, pc.get(view.color if source is None else source), (0, 0))
+    _tonemap_draw(renderer, pc.get(view.color if source is None else source), (0, 0), pc, layer,
+                  (view.width, view.height))
 
 
 def present_execute(renderer: Renderer, pc, view: View, final_handle, first: bool, ldr_handle=None,
-                    kept=None) -> None:
+                    kept=None, layer: ColorLayer | None = None) -> None:
     """Put a view into its rectangle of the window image (with a frame when partial): tone-map its HDR
     colour there, or, when it was already tone-mapped at a smaller size (``ldr_handle``), upscale it
     bilinearly.  ``kept`` = (handle, (x, y, w, h)): a view presented whole over its restored static layer
     (Renderer._partial_present) copies the layer's tone-mapped picture (a memory copy) and tone-maps only
-    that rectangle, where passes wrote over the layer."""
+    that rectangle, where passes wrote over the layer.  ``layer``: a colour layer folded into the tone map."""
     ctx = renderer.ctx
     fbo = renderer.framebuffer(pc.get(final_handle))
     fbo.use()
@@ -481,7 +513,7 @@ def present_execute(renderer: Renderer, pc, view: View, final_handle, first: boo
         if rw > 0 and rh > 0:
             fbo.scissor = (rx, ry, rw, rh)
             try:
-                _tonemap_draw(renderer, pc.get(view.color), (0, 0))
+                _tonemap_draw(renderer, pc.get(view.color), (0, 0), pc, layer, (view.width, view.height))
             finally:
                 fbo.scissor = None
         return
@@ -493,7 +525,7 @@ def present_execute(renderer: Renderer, pc, view: View, final_handle, first: boo
         fbo.clear(*view.extra["border"], 1.0, viewport=(x - 2, y - 2, w + 4, h + 4))
     fbo.viewport = (x, y, w, h)
     if ldr_handle is None:
-        _tonemap_draw(renderer, pc.get(view.color), (x, y))  # the view's size is the rectangle's
+        _tonemap_draw(renderer, pc.get(view.color), (x, y), pc, layer, (w, h))  # the view's size is the rectangle's
     else:
         vao = _fullscreen(renderer, "upscale.frag")
         pc.get(ldr_handle).use(0)

@@ -21,7 +21,7 @@ import moderngl
 import numpy as np
 
 from engine.render.components import Camera, Hud, look_at, projection, view_matrix, viewport_pixels
-from engine.render.feature import OVERLAY, SKY, RenderFeature, View
+from engine.render.feature import OVERLAY, SKY, ColorLayer, RenderFeature, View
 from engine.render.graph import RenderGraph, ResourcePool, TextureDesc
 from engine.spatial import Transform
 
@@ -177,6 +177,7 @@ class Renderer:
         self._static: dict[int, _StaticLayer] = {}
         self._static_seen: dict[int, tuple[tuple | None, dict[str, Any]]] = {}
         self.static_layer_counts = {"drawn": 0, "stored": 0, "restored": 0}  # views per outcome (tests, profiling)
+        self.fold_color_layers = True  # a view's last colour layer is added in its tone map (_fold_layer)
         self._shader_generation = 0  # bumped by reload_shaders: kept pictures drawn with older shaders are stale
         self._final_fbo: moderngl.Framebuffer | None = None
         self._resize_final()
@@ -659,24 +660,31 @@ class Renderer:
         x, y, w, h = view.extra["rect"]
         source = view.color
         held = view.extra.get("held")
+        layer = self._fold_layer(view) if held != "shown" else None
+
+        def read_color(b):  # the view's colour, and the textures of a colour layer folded into its tone map
+            b.read(view.color)
+            if layer is not None:
+                b.read(layer.texture)
+
         if held is not None:  # tone-mapped into the kept picture when rendered; presented from it every frame
             out["ldr"] = graph.import_resource(f"{view.name}.held", view.extra["held_texture"],
                                                TextureDesc(view.width, view.height, "rgba8"))
             if held == "rendered":
                 def held_setup(b):
-                    b.read(view.color)
+                    read_color(b)
                     out["ldr"] = b.write(out["ldr"])
 
                 graph.add_pass(f"tonemap.{view.name}", held_setup,
-                               lambda pc: tonemap_execute(self, pc, view, out["ldr"]))
+                               lambda pc: tonemap_execute(self, pc, view, out["ldr"], layer=layer))
             source = None
         elif (view.width, view.height) != (w, h):
             def tonemap_setup(b):
-                b.read(view.color)
+                read_color(b)
                 out["ldr"] = b.write(b.create(f"{view.name}.ldr", TextureDesc(view.width, view.height, "rgba8")))
 
             graph.add_pass(f"tonemap.{view.name}", tonemap_setup,
-                           lambda pc: tonemap_execute(self, pc, view, out["ldr"]))
+                           lambda pc: tonemap_execute(self, pc, view, out["ldr"], layer=layer))
             source = None
 
         region = self._partial_present(view) if source is not None else None
@@ -687,7 +695,10 @@ class Renderer:
                                              TextureDesc(view.width, view.height, "rgba8"))
 
         def setup(b):
-            b.read(view.color if source is not None else out["ldr"])
+            if source is not None:
+                read_color(b)
+            else:
+                b.read(out["ldr"])
             if kept_ldr is not None:
                 b.read(kept_ldr)
             out["final"] = b.write(final)
@@ -695,8 +706,22 @@ class Renderer:
         graph.add_pass(f"present.{view.name}", setup,
                        lambda pc: present_execute(self, pc, view, out["final"], first,
                                                   None if source is not None else out["ldr"],
-                                                  kept=None if kept_ldr is None else (kept_ldr, region)))
+                                                  kept=None if kept_ldr is None else (kept_ldr, region),
+                                                  layer=layer if source is not None else None))
         return out["final"]
+
+    def _fold_layer(self, view: View) -> ColorLayer | None:
+        """The colour layer (:class:`engine.render.feature.ColorLayer`) that ``view``'s tone map applies instead of
+        the pass that declared it: the last one declared, when no pass wrote the view's colour after it (and
+        ``fold_color_layers`` is on). Marks it folded, so that pass draws nothing."""
+        entry = view.extra.get("color_layer")
+        if entry is None or not self.fold_color_layers:
+            return None
+        layer, version = entry
+        if version != view.color:
+            return None
+        layer.folded = True
+        return layer
 
     # ----------------------------------------------------------------- pictures
     def read_image(self):

@@ -23,5 +23,13 @@ void main() {
     float rim = max(1.0 - r2, 0.0);
     float e = 0.999605 + r2 * (-2.979417 + r2 * (4.258832 + r2 * (-3.428027 + r2 * 1.235257)));
     float g = rim * rim * e * v_alpha;
+#ifdef TWO_CHANNEL
+    // one colour pair in the view (render.py): the colour below is linear in g and g³ with the pair's colours as
+    // coefficients, mix(color, core, g²) · g·I = color · g·I + (core - color) · g³·I, so the buffer sums the two
+    // weights and the composite applies the colours once per pixel (half the channels to blend)
+    float gi = g * intensity;
+    frag = vec4(gi, gi * g * g, 0.0, 0.0);
+#else
     frag = vec4(mix(color, core_color, g * g) * (g * intensity), 0.0);
+#endif
 }

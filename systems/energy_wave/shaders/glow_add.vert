@@ -1,0 +1,1 @@
+#include "fullscreen.vert"
