@@ -89,9 +89,9 @@ class ColorLayer:
     particles with their bloom).  ``matrix`` (3 × 3, its columns multiply the texture's channels) turns the
     channels into colour (the identity for an RGB buffer).
 
-    Declared with :func:`add_color_layer` in the setup of the pass that adds it.  When no later pass writes the
-    view's colour, the renderer applies the layer in the view's tone map instead (post-processing stacks fold
-    their bloom into the tone map the same way) and sets ``folded``: the pass's execute then draws nothing.
+    Declared with :func:`engine.render.passes.add_color_layer`, which adds the pass that draws it.  When no later
+    pass writes the view's colour, the renderer applies the layer in the view's tone map instead (post-processing
+    stacks fold their bloom into the tone map the same way) and sets ``folded``: that pass then draws nothing.
     On a software rasteriser that saves a read-modify-write of the HDR target over the region."""
 
     texture: Any
@@ -103,17 +103,6 @@ class ColorLayer:
         """``layer_matrix`` as a mat3 uniform (column-major)."""
         m = np.asarray(self.matrix, np.float64).reshape(3, 3)
         return dict(layer_matrix=tuple(float(v) for v in m.T.ravel()))
-
-
-def add_color_layer(b, view: View, layer: ColorLayer) -> ColorLayer:
-    """In a pass's setup: declare that the pass adds ``layer`` to ``view``'s colour (a read of its texture and a
-    write of the colour in its region, :func:`write_view_color`).  The pass's execute draws it unless the
-    renderer folded it into the tone map (``layer.folded``, known when the frame executes)."""
-    b.read(layer.texture)
-    layer.folded = False
-    write_view_color(b, view, layer.region)
-    view.extra["color_layer"] = (layer, view.color)  # foldable while the colour stays at this version
-    return layer
 
 
 class RenderFeature:

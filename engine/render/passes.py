@@ -16,7 +16,7 @@ import numpy as np
 
 from engine.builtin import Terrain
 from engine.render.components import Hud, MeshConfig
-from engine.render.feature import OPAQUE, OVERLAY, SKY, ColorLayer, RenderFeature, View
+from engine.render.feature import OPAQUE, OVERLAY, SKY, ColorLayer, RenderFeature, View, write_view_color
 from engine.render.terrain import TerrainChunks, build_terrain_chunks, draw_ranges, select_levels, shade_texels
 from engine.spatial import Transform, cross, model_matrices
 
@@ -444,6 +444,45 @@ def _fullscreen(renderer: Renderer, frag: str, defines: tuple[str, ...] = ()) ->
         vao = renderer.ctx.vertex_array(prog, [])
         cache[(frag, defines)] = vao
     return vao
+
+
+def add_color_layer(graph, renderer: Renderer, name: str, view: View, layer: ColorLayer) -> ColorLayer:
+    """Declare the pass ``name`` that adds ``layer`` (:class:`engine.render.feature.ColorLayer`) to ``view``'s
+    colour: it reads the layer's texture and writes the colour in the layer's region
+    (:func:`engine.render.feature.write_view_color`).  It draws an additive full-screen triangle scissored to the
+    region, unless the renderer folded the layer into the view's tone map (``layer.folded``: nothing was drawn
+    over it; known when the frame executes)."""
+
+    def setup(b):
+        b.read(layer.texture)
+        layer.folded = False
+        write_view_color(b, view, layer.region)
+        view.extra["color_layer"] = (layer, view.color)  # foldable while the colour stays at this version
+        handles["color"] = view.color
+
+    def execute(pc):
+        if layer.folded:
+            return
+        ctx = renderer.ctx
+        fbo = renderer.framebuffer(pc.get(handles["color"]))
+        fbo.scissor = layer.region
+        fbo.use()
+        ctx.disable(moderngl.DEPTH_TEST)
+        ctx.enable(moderngl.BLEND)
+        ctx.blend_func = moderngl.ONE, moderngl.ONE
+        try:
+            vao = _fullscreen(renderer, "color_layer.frag")
+            pc.get(layer.texture).use(0)
+            set_uniforms(vao.program, layer=0, **layer.uniforms())
+            vao.render(moderngl.TRIANGLES, vertices=3)
+        finally:
+            fbo.scissor = None
+            ctx.blend_func = moderngl.DEFAULT_BLENDING
+            ctx.disable(moderngl.BLEND)
+
+    handles: dict[str, Any] = {}
+    graph.add_pass(name, setup, execute)
+    return layer
 
 
 def _tonemap_draw(renderer: Renderer, hdr: moderngl.Texture, origin: tuple[int, int], pc=None,

@@ -373,3 +373,67 @@ def test_over_a_kept_static_layer_only_the_waves_rectangle_is_tone_mapped_and_th
     assert all(0 < r[2] * r[3] < 160 * 120 for r in regions[3:])
     for a, b in zip(cached, plain):
         assert np.array_equal(a, b)
+
+
+SECOND_EMITTER = """
+[[entities]]
+name = "emitter2"
+[entities.components.Transform]
+position = [0.5, 1.3, 1.2]
+[entities.components.EnergyWaveEmitter]
+preset = "energy_wave/reference"
+color = [1.0, 0.35, 0.2]
+"""
+
+
+@pytest.mark.parametrize("extra", ["", SECOND_EMITTER])
+def test_one_colour_pair_draws_two_channel_buffers_with_the_rgb_picture(tmp_path, extra):
+    """One colour pair in the view: the buffers hold the weights Σ g·I and Σ g³·I (two channels) and the layer's
+    matrix applies the colours; the picture is the RGB buffers' within rounding.  Two pairs: RGB buffers."""
+    from tests.render_utils import make_renderer
+
+    pictures, channels = {}, {}
+    for pairs in (True, False):
+        app = scene_app(tmp_path, "reference", extra)
+        app.step(70)
+        renderer = make_renderer(app, 200, 150)
+        feature = next(f for f in renderer.features if f.name == "energy_wave")
+        feature.colour_pairs = pairs
+        try:
+            app.render_frame()
+            pictures[pairs] = np.asarray(renderer.read_image(), np.int16)
+            channels[pairs] = feature.last_channels
+        finally:
+            renderer.release()
+            app.renderer = None
+    assert channels == ({True: 2, False: 3} if not extra else {True: 3, False: 3})
+    diff = np.abs(pictures[True] - pictures[False])
+    assert diff.max() <= 1
+    if not extra:
+        assert (pictures[True].mean(axis=2) > 150).sum() > 300  # the splash is there
+    else:
+        assert np.array_equal(pictures[True], pictures[False])  # the same path
+
+
+def test_the_composite_is_folded_into_the_tone_map_with_the_same_picture(tmp_path):
+    """Nothing is drawn over the wave: the view's tone map adds its layer and the composite pass draws nothing;
+    the picture is the composite pass's within rounding (the pass rounds the sum to half floats)."""
+    from tests.render_utils import make_renderer
+
+    pictures, folded = {}, {}
+    for fold in (True, False):
+        app = scene_app(tmp_path, "reference")
+        app.step(70)
+        renderer = make_renderer(app, 200, 150)
+        renderer.fold_color_layers = fold
+        try:
+            app.render_frame()
+            pictures[fold] = np.asarray(renderer.read_image(), np.int16)
+            layer = renderer.views[0].extra["color_layer"][0]
+            folded[fold] = layer.folded
+        finally:
+            renderer.release()
+            app.renderer = None
+    assert folded == {True: True, False: False}
+    diff = np.abs(pictures[True] - pictures[False])
+    assert diff.max() <= 1 and (pictures[True].mean(axis=2) > 150).sum() > 300
