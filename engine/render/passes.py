@@ -536,12 +536,14 @@ def tonemap_execute(renderer: Renderer, pc, view: View, ldr_handle, source=None,
 
 
 def present_execute(renderer: Renderer, pc, view: View, final_handle, first: bool, ldr_handle=None,
-                    kept=None, layer: ColorLayer | None = None) -> None:
+                    kept=None, layer: ColorLayer | None = None, source=None) -> None:
     """Put a view into its rectangle of the window image (with a frame when partial): tone-map its HDR
     colour there, or, when it was already tone-mapped at a smaller size (``ldr_handle``), upscale it
     bilinearly.  ``kept`` = (handle, (x, y, w, h)): a view presented whole over its restored static layer
     (Renderer._partial_present) copies the layer's tone-mapped picture (a memory copy) and tone-maps only
-    that rectangle, where passes wrote over the layer.  ``layer``: a colour layer folded into the tone map."""
+    that rectangle, where passes wrote over the layer.  ``layer``: a colour layer folded into the tone map;
+    ``source``: the HDR colour to tone-map instead of the view's (its kept static layer, Renderer._present_source)."""
+    hdr = view.color if source is None else source
     ctx = renderer.ctx
     fbo = renderer.framebuffer(pc.get(final_handle))
     fbo.use()
@@ -552,7 +554,7 @@ def present_execute(renderer: Renderer, pc, view: View, final_handle, first: boo
         if rw > 0 and rh > 0:
             fbo.scissor = (rx, ry, rw, rh)
             try:
-                _tonemap_draw(renderer, pc.get(view.color), (0, 0), pc, layer, (view.width, view.height))
+                _tonemap_draw(renderer, pc.get(hdr), (0, 0), pc, layer, (view.width, view.height))
             finally:
                 fbo.scissor = None
         return
@@ -564,7 +566,7 @@ def present_execute(renderer: Renderer, pc, view: View, final_handle, first: boo
         fbo.clear(*view.extra["border"], 1.0, viewport=(x - 2, y - 2, w + 4, h + 4))
     fbo.viewport = (x, y, w, h)
     if ldr_handle is None:
-        _tonemap_draw(renderer, pc.get(view.color), (x, y), pc, layer, (w, h))  # the view's size is the rectangle's
+        _tonemap_draw(renderer, pc.get(hdr), (x, y), pc, layer, (w, h))  # the view's size is the rectangle's
     else:
         vao = _fullscreen(renderer, "upscale.frag")
         pc.get(ldr_handle).use(0)

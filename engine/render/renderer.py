@@ -514,6 +514,9 @@ class Renderer:
 
     def _declare_static_restore(self, graph, view: View) -> None:
         color, depth = self._static_layer_resources(graph, view)
+        # the present tone-maps the kept colour itself when no pass draws into the restored colour (only a colour
+        # layer folded into the tone map wrote it): then only the depth is copied (_present_source)
+        restore = view.extra["restore"] = {"color": True, "kept_color": color}
 
         def setup(b):
             b.read(color)
@@ -521,7 +524,10 @@ class Renderer:
             self._create_view_targets(b, view)
 
         def execute(pc):
-            self._copy_layer(pc, (color, depth), (view.color, view.depth))
+            if restore["color"]:
+                self._copy_layer(pc, (color, depth), (view.color, view.depth))
+            else:
+                self._copy_layer(pc, (None, depth), (None, view.depth))
 
         graph.add_pass(f"static_restore.{view.name}", setup, execute)
 
@@ -602,9 +608,12 @@ class Renderer:
     def _copy_layer(self, pc, source: tuple, target: tuple) -> None:
         """Colour and depth of ``source`` (handles) into ``target``'s: a blit of equal formats and sizes, which the
         driver makes a memory copy."""
-        fbo = self.framebuffer(pc.get(target[0]), pc.get(target[1]))
+        def get(handle):
+            return None if handle is None else pc.get(handle)
+
+        fbo = self.framebuffer(get(target[0]), get(target[1]))
         fbo.use()  # its own viewport and no scissor: a blit is clipped by the scissor test
-        self.ctx.copy_framebuffer(fbo, self.framebuffer(pc.get(source[0]), pc.get(source[1])))
+        self.ctx.copy_framebuffer(fbo, self.framebuffer(get(source[0]), get(source[1])))
 
     def _free_static(self, camera: int) -> None:
         kept = self._static.pop(camera, None)
@@ -661,9 +670,12 @@ class Renderer:
         source = view.color
         held = view.extra.get("held")
         layer = self._fold_layer(view) if held != "shown" else None
+        hdr = self._present_source(view, layer) if held != "shown" else None
 
         def read_color(b):  # the view's colour, and the textures of a colour layer folded into its tone map
             b.read(view.color)
+            if hdr is not None:
+                b.read(hdr)
             if layer is not None:
                 b.read(layer.texture)
 
@@ -676,7 +688,7 @@ class Renderer:
                     out["ldr"] = b.write(out["ldr"])
 
                 graph.add_pass(f"tonemap.{view.name}", held_setup,
-                               lambda pc: tonemap_execute(self, pc, view, out["ldr"], layer=layer))
+                               lambda pc: tonemap_execute(self, pc, view, out["ldr"], source=hdr, layer=layer))
             source = None
         elif (view.width, view.height) != (w, h):
             def tonemap_setup(b):
@@ -684,7 +696,7 @@ class Renderer:
                 out["ldr"] = b.write(b.create(f"{view.name}.ldr", TextureDesc(view.width, view.height, "rgba8")))
 
             graph.add_pass(f"tonemap.{view.name}", tonemap_setup,
-                           lambda pc: tonemap_execute(self, pc, view, out["ldr"], layer=layer))
+                           lambda pc: tonemap_execute(self, pc, view, out["ldr"], source=hdr, layer=layer))
             source = None
 
         region = self._partial_present(view) if source is not None else None
@@ -707,8 +719,21 @@ class Renderer:
                        lambda pc: present_execute(self, pc, view, out["final"], first,
                                                   None if source is not None else out["ldr"],
                                                   kept=None if kept_ldr is None else (kept_ldr, region),
-                                                  layer=layer if source is not None else None))
+                                                  layer=layer if source is not None else None, source=hdr))
         return out["final"]
+
+    def _present_source(self, view: View, layer: ColorLayer | None):
+        """The kept static colour (a graph handle) when ``view``'s colour is its restored static layer untouched
+        but for ``layer`` folded into the tone map: the tone map reads the kept picture and the restore copies
+        only the depth (one full-size HDR copy fewer). None: the view's colour."""
+        restore = view.extra.get("restore")
+        if restore is None or view.extra.get("static_layer") != "restored":
+            return None
+        writes = view.color.version - view.extra["restored_version"]
+        if writes != (1 if layer is not None else 0):
+            return None
+        restore["color"] = False
+        return restore["kept_color"]
 
     def _fold_layer(self, view: View) -> ColorLayer | None:
         """The colour layer (:class:`engine.render.feature.ColorLayer`) that ``view``'s tone map applies instead of

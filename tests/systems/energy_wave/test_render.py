@@ -361,12 +361,17 @@ def test_over_a_kept_static_layer_only_the_waves_rectangle_is_tone_mapped_and_th
                 app.render_frame()
                 pictures.append(np.asarray(renderer.read_image()))
                 regions.append(renderer.views[0].extra["present_region"])
+                restores.append(renderer.views[0].extra.get("restore", {}).get("color"))
         finally:
             renderer.release()
             app.renderer = None
         return pictures, regions
 
+    restores = []
     cached, regions = run(True)
+    # restored frames: only the wave's layer, folded into the tone map, wrote the colour, so the present reads the
+    # kept colour and the restore copies only the depth
+    assert restores == [None] * 3 + [False] * 3
     plain, whole = run(False)
     assert whole == [None] * 6
     assert regions[:3] == [None] * 3 and all(r is not None for r in regions[3:])  # drawn, drawn, stored, restored
