@@ -99,11 +99,6 @@ class ColorLayer:
     region: tuple[int, int, int, int]
     folded: bool = False
 
-    def uniforms(self) -> dict[str, Any]:
-        """``layer_matrix`` as a mat3 uniform (column-major)."""
-        m = np.asarray(self.matrix, np.float64).reshape(3, 3)
-        return dict(layer_matrix=tuple(float(v) for v in m.T.ravel()))
-
 
 class RenderFeature:
     """Base class of a plugin's render passes; GL objects are created lazily and released in ``release``."""

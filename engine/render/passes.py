@@ -446,12 +446,41 @@ def _fullscreen(renderer: Renderer, frag: str, defines: tuple[str, ...] = ()) ->
     return vao
 
 
+def add_texture(renderer: Renderer, target: moderngl.Texture, texture: moderngl.Texture, matrix: np.ndarray,
+                region: tuple[int, int, int, int]) -> None:
+    """Add ``matrix`` · ``texture`` (3 × 3, its columns multiply the texture's channels; the texture sampled
+    bilinearly, upsampled when smaller) onto ``target`` inside ``region`` (a scissor box in the target's
+    pixels): an additive full-screen triangle (color_layer.frag)."""
+    ctx = renderer.ctx
+    fbo = renderer.framebuffer(target)
+    fbo.scissor = region
+    fbo.use()
+    ctx.disable(moderngl.DEPTH_TEST)
+    ctx.enable(moderngl.BLEND)
+    ctx.blend_func = moderngl.ONE, moderngl.ONE
+    try:
+        vao = _fullscreen(renderer, "color_layer.frag")
+        texture.use(0)
+        set_uniforms(vao.program, layer=0, layer_matrix=_mat3(matrix))
+        vao.render(moderngl.TRIANGLES, vertices=3)
+    finally:
+        fbo.scissor = None
+        ctx.blend_func = moderngl.DEFAULT_BLENDING
+        ctx.disable(moderngl.BLEND)
+
+
+def _mat3(matrix: np.ndarray) -> tuple[float, ...]:
+    """A 3 × 3 matrix as a mat3 uniform (column-major)."""
+    return tuple(float(v) for v in np.asarray(matrix, np.float64).reshape(3, 3).T.ravel())
+
+
 def add_color_layer(graph, renderer: Renderer, name: str, view: View, layer: ColorLayer) -> ColorLayer:
     """Declare the pass ``name`` that adds ``layer`` (:class:`engine.render.feature.ColorLayer`) to ``view``'s
     colour: it reads the layer's texture and writes the colour in the layer's region
-    (:func:`engine.render.feature.write_view_color`).  It draws an additive full-screen triangle scissored to the
-    region, unless the renderer folded the layer into the view's tone map (``layer.folded``: nothing was drawn
-    over it; known when the frame executes)."""
+    (:func:`engine.render.feature.write_view_color`).  It draws the layer with :func:`add_texture`, unless the
+    renderer folded the layer into the view's tone map (``layer.folded``: nothing was drawn over it; known when
+    the frame executes)."""
+    handles: dict[str, Any] = {}
 
     def setup(b):
         b.read(layer.texture)
@@ -461,26 +490,9 @@ def add_color_layer(graph, renderer: Renderer, name: str, view: View, layer: Col
         handles["color"] = view.color
 
     def execute(pc):
-        if layer.folded:
-            return
-        ctx = renderer.ctx
-        fbo = renderer.framebuffer(pc.get(handles["color"]))
-        fbo.scissor = layer.region
-        fbo.use()
-        ctx.disable(moderngl.DEPTH_TEST)
-        ctx.enable(moderngl.BLEND)
-        ctx.blend_func = moderngl.ONE, moderngl.ONE
-        try:
-            vao = _fullscreen(renderer, "color_layer.frag")
-            pc.get(layer.texture).use(0)
-            set_uniforms(vao.program, layer=0, **layer.uniforms())
-            vao.render(moderngl.TRIANGLES, vertices=3)
-        finally:
-            fbo.scissor = None
-            ctx.blend_func = moderngl.DEFAULT_BLENDING
-            ctx.disable(moderngl.BLEND)
+        if not layer.folded:
+            add_texture(renderer, pc.get(handles["color"]), pc.get(layer.texture), layer.matrix, layer.region)
 
-    handles: dict[str, Any] = {}
     graph.add_pass(name, setup, execute)
     return layer
 
@@ -516,7 +528,7 @@ def _tonemap_draw(renderer: Renderer, hdr: moderngl.Texture, origin: tuple[int, 
         added = _fullscreen(renderer, "tonemap.frag", ("ADD_LAYER",))
         pc.get(layer.texture).use(1)
         set_uniforms(added.program, hdr=0, layer=1, exposure=renderer.settings.exposure,
-                     origin=origin, view_size=(float(size[0]), float(size[1])), **layer.uniforms())
+                     origin=origin, view_size=(float(size[0]), float(size[1])), layer_matrix=_mat3(layer.matrix))
         ctx.scissor = (x0, y0, x1 - x0, y1 - y0)
         added.render(moderngl.TRIANGLES, vertices=3)
     finally:

@@ -726,8 +726,8 @@ class Renderer:
         """The kept static colour (a graph handle) when ``view``'s colour is its restored static layer untouched
         but for ``layer`` folded into the tone map: the tone map reads the kept picture and the restore copies
         only the depth (one full-size HDR copy fewer). None: the view's colour."""
-        restore = view.extra.get("restore")
-        if restore is None or view.extra.get("static_layer") != "restored":
+        restore = view.extra.get("restore")  # set on restored frames only (_declare_static_restore)
+        if restore is None:
             return None
         writes = view.color.version - view.extra["restored_version"]
         if writes != (1 if layer is not None else 0):

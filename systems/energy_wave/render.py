@@ -44,7 +44,7 @@ import numpy as np
 
 from engine.render.feature import TRANSPARENT, ColorLayer, RenderFeature, View
 from engine.render.graph import TextureDesc
-from engine.render.passes import add_color_layer, set_uniforms
+from engine.render.passes import add_color_layer, add_texture, set_uniforms
 
 from .extract import BAR, RECORD_FLOATS, SINGLE, TRAIL, FrameData, extract_frame
 from .simulate import bar_sizes, trail_sizes
@@ -197,7 +197,7 @@ class EnergyWaveFeature(RenderFeature):
         self._staging = np.zeros((0, RECORD_FLOATS), np.float32)  # the upload's whole rows, reused
         self._indices: moderngl.Buffer | None = None
         self._index_sprites = 0  # sprites the index buffer covers
-        self._fullscreen: dict[tuple, moderngl.VertexArray] = {}
+        self._fullscreen: dict[str, moderngl.VertexArray] = {}
         self._points: dict[tuple[str, ...], moderngl.VertexArray] = {}
         self._quads: dict[tuple[str, ...], moderngl.VertexArray] = {}
         # sprites as point sprites (one vertex each: llvmpipe's vertex stage and triangle setup ran 4 vertices and
@@ -218,15 +218,19 @@ class EnergyWaveFeature(RenderFeature):
     def _program(self, name: str, defines: tuple[str, ...] = ()) -> moderngl.Program:
         return self.renderer.load_program(SHADERS, name, defines)
 
-    def _point_vao(self, defines: tuple[str, ...]) -> moderngl.VertexArray:
-        """The point-sprite variant: one vertex a sprite, its square rasterised by the driver (gl_PointSize)."""
-        prog = self._program("particles", ("POINTS",) + defines)
-        vao = self._points.get(defines)
-        if vao is None or vao.program is not prog:  # a shader reload gives a new program
+    def _cached_vao(self, cache: dict, key, prog: moderngl.Program, **kwargs) -> moderngl.VertexArray:
+        """``cache[key]``: a buffer-less vertex array of ``prog`` (``kwargs``: its index buffer), remade when the
+        program changed (F5 reloads shaders)."""
+        vao = cache.get(key)
+        if vao is None or vao.program is not prog:
             if vao is not None:
                 vao.release()
-            vao = self._points[defines] = self.ctx.vertex_array(prog, [])
+            vao = cache[key] = self.ctx.vertex_array(prog, [], **kwargs)
         return vao
+
+    def _point_vao(self, defines: tuple[str, ...]) -> moderngl.VertexArray:
+        """The point-sprite variant: one vertex a sprite, its square rasterised by the driver (gl_PointSize)."""
+        return self._cached_vao(self._points, defines, self._program("particles", ("POINTS",) + defines))
 
     def _sprite_vao(self, sprites: int, defines: tuple[str, ...]) -> moderngl.VertexArray:
         """The sprites' vertex array: no attributes (corners from ``gl_VertexID``), an index buffer of two triangles
@@ -239,23 +243,11 @@ class EnergyWaveFeature(RenderFeature):
             self._index_sprites = 1 << max(10, (sprites - 1).bit_length())
             corners = 4 * np.arange(self._index_sprites, dtype=np.uint32)[:, None] + QUAD_INDICES
             self._indices = self.ctx.buffer(corners.tobytes())
-        prog = self._program("particles", defines)
-        vao = self._quads.get(defines)
-        if vao is None or vao.program is not prog:
-            if vao is not None:
-                vao.release()
-            vao = self._quads[defines] = self.ctx.vertex_array(prog, [], index_buffer=self._indices,
-                                                               index_element_size=4)
-        return vao
+        return self._cached_vao(self._quads, defines, self._program("particles", defines),
+                                index_buffer=self._indices, index_element_size=4)
 
-    def _fullscreen_vao(self, name: str, defines: tuple[str, ...] = ()) -> moderngl.VertexArray:
-        prog = self._program(name, defines)
-        vao = self._fullscreen.get((name, defines))
-        if vao is None or vao.program is not prog:
-            if vao is not None:
-                vao.release()
-            vao = self._fullscreen[(name, defines)] = self.ctx.vertex_array(prog, [])
-        return vao
+    def _fullscreen_vao(self, name: str) -> moderngl.VertexArray:
+        return self._cached_vao(self._fullscreen, name, self._program(name))
 
     def _upload(self, data: FrameData) -> None:
         """Records into the RGBA32F texture (once per frame, shared by every view)."""
@@ -418,21 +410,8 @@ class EnergyWaveFeature(RenderFeature):
             h["particles"] = b.write(h["particles"])
 
         def glow_execute(pc):  # the bloom added into the particle buffer: the composite then samples one texture
-            fbo = self.renderer.framebuffer(pc.get(h["particles"]))
-            fbo.scissor = pixel_rect(_grow(rects["composite"], 2.0 / size[0], 2.0 / size[1]), *size)
-            fbo.use()
-            ctx.disable(moderngl.DEPTH_TEST)
-            ctx.enable(moderngl.BLEND)
-            ctx.blend_func = moderngl.ONE, moderngl.ONE
-            try:
-                vao = self._fullscreen_vao("glow_add")
-                pc.get(h["blur_y"]).use(0)
-                set_uniforms(vao.program, glow=0, glow_strength=float(glow))
-                vao.render(moderngl.TRIANGLES, vertices=3)
-            finally:
-                fbo.scissor = None
-                ctx.blend_func = moderngl.DEFAULT_BLENDING
-                ctx.disable(moderngl.BLEND)
+            add_texture(self.renderer, pc.get(h["particles"]), pc.get(h["blur_y"]), float(glow) * np.eye(3),
+                        pixel_rect(_grow(rects["composite"], 2.0 / size[0], 2.0 / size[1]), *size))
 
         graph.add_pass(f"energy_wave.sprites.{view.name}", sprites_setup, sprites_execute)
         if glow > 0.0:

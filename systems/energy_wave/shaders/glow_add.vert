@@ -1,1 +1,0 @@
-#include "fullscreen.vert"
