@@ -13,7 +13,7 @@ import logging
 import re
 import time
 from dataclasses import dataclass, replace
-from collections.abc import Callable
+from collections.abc import Callable, Hashable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -379,6 +379,7 @@ class Renderer:
                 self._declare_static_restore(timed, view)
                 # what the passes after the copy write into the view's colour, and where (write_view_color)
                 view.extra["color_regions"], view.extra["restored_version"] = [], view.color.version
+                view.extra["restored_depth"] = (view.depth.version, self._static[view.camera_entity].key)
             else:  # "stored": the static features first, then a copy of what they drew into the kept layer
                 self._declare_view_targets(timed, view)
                 for index, feature in static:
@@ -721,6 +722,16 @@ class Renderer:
                                                   kept=None if kept_ldr is None else (kept_ldr, region),
                                                   layer=layer if source is not None else None, source=hdr))
         return out["final"]
+
+    def static_depth_key(self, view: View) -> Hashable | None:
+        """The kept static layer's key when ``view``'s depth is, at this point of the frame's declaration, that
+        layer's depth copied back and not written since (a restored frame, no later pass drawing depth); None
+        otherwise.  The same key means the same depth, bit for bit: a feature may keep what it derives from the
+        depth (a smaller copy, say) under this key and skip re-deriving it while the key stays."""
+        restored = view.extra.get("restored_depth")  # (depth version after the restore, the layer's key)
+        if restored is None or view.depth.version != restored[0]:
+            return None
+        return restored[1]
 
     def _present_source(self, view: View, layer: ColorLayer | None):
         """The kept static colour (a graph handle) when ``view``'s colour is its restored static layer untouched

@@ -36,6 +36,7 @@ the same while the fill is limited to the pixels near the wave.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -183,6 +184,15 @@ def pass_rects(bounds: UV, particles: tuple[int, int], glow_size: tuple[int, int
     return dict(composite=composite, blur_y=blur_y, blur_x=blur_x, particles=cleared)
 
 
+@dataclass
+class _KeptDepth:
+    """A camera's half-resolution depth copy and the static layer key it was copied from."""
+
+    texture: moderngl.Texture
+    key: object = None  # the key the copy holds (None: not copied yet)
+    wanted: object = None  # this frame's key
+
+
 class EnergyWaveFeature(RenderFeature):
     """Draws every EnergyWaveEmitter's particles (section 3.4 of seeds/000)."""
 
@@ -209,6 +219,12 @@ class EnergyWaveFeature(RenderFeature):
         # two-channel buffers when the view's emitters share one colour pair (COLOR_FORMAT, PAIR_FORMAT)
         self.colour_pairs = True
         self.last_channels = 0  # 2 or 3: the last view's buffers (tests, profiling)
+        # the half-resolution depth kept per camera while its view's depth is a restored static layer untouched
+        # (Renderer.static_depth_key): the same key is the same depth, so the copy is made once and the later
+        # frames clear the colour only (off: the copy every frame; A/B, tests)
+        self.keep_half_depth = True
+        self._half_depth: dict[int, _KeptDepth] = {}
+        self.depth_copies = 0  # half-resolution depth copies drawn (tests)
 
     # ------------------------------------------------------------------------------------------ extraction
     def extract(self, world: World) -> FrameData:
@@ -339,17 +355,24 @@ class EnergyWaveFeature(RenderFeature):
             return  # every sprite and its glow off screen: nothing reaches the image
         h: dict[str, object] = {}
 
+        kept = self._kept_depth(view, size)
+
         def sprites_setup(b):
             b.read(view.depth)
             h["particles"] = b.write(b.create(f"energy_wave.{view.name}.particles",
                                               TextureDesc(size[0], size[1], fmt)))
-            h["depth"] = b.write(b.create(f"energy_wave.{view.name}.depth", TextureDesc(size[0], size[1], "depth24")))
+            if kept is None:
+                h["depth"] = b.write(b.create(f"energy_wave.{view.name}.depth",
+                                              TextureDesc(size[0], size[1], "depth24")))
 
         def sprites_execute(pc):
             self._upload(data)
-            fbo = self.renderer.framebuffer(pc.get(h["particles"]), pc.get(h["depth"]))
-            fbo.scissor = pixel_rect(rects["particles"], *size)
-            fbo.depth_mask = True
+            fbo = self.renderer.framebuffer(pc.get(h["particles"]), kept.texture if kept else pc.get(h["depth"]))
+            copy = kept is None or kept.key != kept.wanted
+            # the depth copy clears the colour too, in the particle rectangle (a scissored clear is slow on
+            # llvmpipe); the whole buffer when the copy is kept, since later frames may draw elsewhere in it
+            fbo.scissor = pixel_rect(rects["particles"], *size) if kept is None else None
+            fbo.depth_mask = copy
             fbo.use()
             depth = pc.get(view.depth)
             compare = depth.compare_func
@@ -358,10 +381,17 @@ class EnergyWaveFeature(RenderFeature):
             ctx.enable(moderngl.DEPTH_TEST)
             ctx.disable(moderngl.BLEND)
             try:
-                ctx.depth_func = "1"  # colour 0 and the view's depth, in the rectangle only
-                prepare = self._fullscreen_vao("depth_copy")
-                set_uniforms(prepare.program, scene_depth=2, depth_scale=float(PARTICLE_DOWNSCALE))
-                prepare.render(moderngl.TRIANGLES, vertices=3)
+                if copy:
+                    ctx.depth_func = "1"  # colour 0 and the view's depth
+                    prepare = self._fullscreen_vao("depth_copy")
+                    set_uniforms(prepare.program, scene_depth=2, depth_scale=float(PARTICLE_DOWNSCALE))
+                    prepare.render(moderngl.TRIANGLES, vertices=3)
+                    self.depth_copies += 1
+                    if kept is not None:
+                        kept.key = kept.wanted
+                else:  # the kept depth is this frame's: the colour cleared, whole (queued like a draw)
+                    fbo.clear(0.0, 0.0, 0.0, 0.0)
+                fbo.scissor = pixel_rect(rects["particles"], *size)
                 ctx.depth_func = "<="  # the old in-shader test kept fragments with z <= scene depth
                 fbo.depth_mask = False
                 fbo.use()
@@ -421,11 +451,28 @@ class EnergyWaveFeature(RenderFeature):
         add_color_layer(graph, self.renderer, f"energy_wave.composite.{view.name}", view,
                         ColorLayer(h["particles"], matrix, pixel_rect(rects["composite"], view.width, view.height)))
 
+    def _kept_depth(self, view: View, size: tuple[int, int]) -> _KeptDepth | None:
+        """The half-resolution depth kept for ``view``'s camera, its ``wanted`` key set to this frame's, when the
+        view's depth is a restored static layer untouched (see :attr:`keep_half_depth`); None otherwise (and
+        what was kept for the camera is released)."""
+        key = self.renderer.static_depth_key(view) if self.keep_half_depth else None
+        kept = self._half_depth.get(view.camera_entity)
+        if kept is not None and (key is None or kept.texture.size != size):
+            self._half_depth.pop(view.camera_entity).texture.release()
+            kept = None
+        if key is None:
+            return None
+        if kept is None:
+            kept = self._half_depth[view.camera_entity] = _KeptDepth(self.ctx.depth_texture(size))
+        kept.wanted = key
+        return kept
+
     def release(self) -> None:
         for obj in (self._records, self._indices, *self._points.values(), *self._quads.values(),
-                    *self._fullscreen.values()):
+                    *self._fullscreen.values(), *(kept.texture for kept in self._half_depth.values())):
             if obj is not None:
                 obj.release()
+        self._half_depth.clear()
         self._records = self._indices = None
         self._index_sprites = 0
         self._points.clear()

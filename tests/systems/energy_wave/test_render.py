@@ -343,10 +343,13 @@ def test_point_sprites_draw_the_quads_picture_and_fall_back_for_large_sprites(tm
     assert (pictures["quads"].mean(axis=2) > 150).sum() > 500  # the splash is there, not only the beam
 
 
-def test_over_a_kept_static_layer_only_the_waves_rectangle_is_tone_mapped_and_the_bits_stay(tmp_path):
+@pytest.mark.parametrize("keep_depth", [True, False])
+def test_over_a_kept_static_layer_only_the_waves_rectangle_is_tone_mapped_and_the_bits_stay(tmp_path, keep_depth):
     """A still camera: the wall and the sky come back from the renderer's static layer, and the present copies
     that layer's tone-mapped picture and tone-maps only the composite's rectangle (where the wave and its glow
-    can be).  Every frame is the same bits as with [render] static_layer_cache off."""
+    can be).  The half-resolution depth is copied on the first restored frame and kept for the next ones
+    (keep_half_depth; off: copied every frame).  Every frame is the same bits as with [render]
+    static_layer_cache off."""
     from tests.render_utils import make_renderer
 
     def run(cache: bool):
@@ -354,11 +357,15 @@ def test_over_a_kept_static_layer_only_the_waves_rectangle_is_tone_mapped_and_th
         app.config.render.static_layer_cache = cache
         app.step(40)
         renderer = make_renderer(app, 160, 120)
+        feature = next(f for f in renderer.features if f.name == "energy_wave")
+        feature.keep_half_depth = keep_depth
         pictures, regions = [], []
         try:
             for _ in range(6):
                 app.step(1)
+                before = feature.depth_copies
                 app.render_frame()
+                copies.append(feature.depth_copies - before)
                 pictures.append(np.asarray(renderer.read_image()))
                 regions.append(renderer.views[0].extra["present_region"])
                 restores.append(renderer.views[0].extra.get("restore", {}).get("color"))
@@ -367,12 +374,15 @@ def test_over_a_kept_static_layer_only_the_waves_rectangle_is_tone_mapped_and_th
             app.renderer = None
         return pictures, regions
 
-    restores = []
+    restores, copies = [], []
     cached, regions = run(True)
     # restored frames: only the wave's layer, folded into the tone map, wrote the colour, so the present reads the
     # kept colour and the restore copies only the depth
     assert restores == [None] * 3 + [False] * 3
+    assert copies == ([1] * 4 + [0] * 2 if keep_depth else [1] * 6)  # drawn, drawn, stored, restored x 3
+    copies.clear()
     plain, whole = run(False)
+    assert copies == [1] * 6
     assert whole == [None] * 6
     assert regions[:3] == [None] * 3 and all(r is not None for r in regions[3:])  # drawn, drawn, stored, restored
     assert all(0 < r[2] * r[3] < 160 * 120 for r in regions[3:])
