@@ -190,7 +190,6 @@ class _KeptDepth:
 
     texture: moderngl.Texture
     key: object = None  # the key the copy holds (None: not copied yet)
-    wanted: object = None  # this frame's key
 
 
 class EnergyWaveFeature(RenderFeature):
@@ -355,7 +354,8 @@ class EnergyWaveFeature(RenderFeature):
             return  # every sprite and its glow off screen: nothing reaches the image
         h: dict[str, object] = {}
 
-        kept = self._kept_depth(view, size)
+        depth_key = self.renderer.static_depth_key(view) if self.keep_half_depth else None
+        kept = self._kept_depth(view, size, depth_key)
 
         def sprites_setup(b):
             b.read(view.depth)
@@ -368,7 +368,7 @@ class EnergyWaveFeature(RenderFeature):
         def sprites_execute(pc):
             self._upload(data)
             fbo = self.renderer.framebuffer(pc.get(h["particles"]), kept.texture if kept else pc.get(h["depth"]))
-            copy = kept is None or kept.key != kept.wanted
+            copy = kept is None or kept.key != depth_key
             # the depth copy clears the colour too, in the particle rectangle (a scissored clear is slow on
             # llvmpipe); the whole buffer when the copy is kept, since later frames may draw elsewhere in it
             fbo.scissor = pixel_rect(rects["particles"], *size) if kept is None else None
@@ -388,7 +388,7 @@ class EnergyWaveFeature(RenderFeature):
                     prepare.render(moderngl.TRIANGLES, vertices=3)
                     self.depth_copies += 1
                     if kept is not None:
-                        kept.key = kept.wanted
+                        kept.key = depth_key
                 else:  # the kept depth is this frame's: the colour cleared, whole (queued like a draw)
                     fbo.clear(0.0, 0.0, 0.0, 0.0)
                 fbo.scissor = pixel_rect(rects["particles"], *size)
@@ -451,11 +451,10 @@ class EnergyWaveFeature(RenderFeature):
         add_color_layer(graph, self.renderer, f"energy_wave.composite.{view.name}", view,
                         ColorLayer(h["particles"], matrix, pixel_rect(rects["composite"], view.width, view.height)))
 
-    def _kept_depth(self, view: View, size: tuple[int, int]) -> _KeptDepth | None:
-        """The half-resolution depth kept for ``view``'s camera, its ``wanted`` key set to this frame's, when the
-        view's depth is a restored static layer untouched (see :attr:`keep_half_depth`); None otherwise (and
-        what was kept for the camera is released)."""
-        key = self.renderer.static_depth_key(view) if self.keep_half_depth else None
+    def _kept_depth(self, view: View, size: tuple[int, int], key) -> _KeptDepth | None:
+        """The half-resolution depth kept for ``view``'s camera when its depth is a restored static layer
+        untouched (``key``: :meth:`Renderer.static_depth_key`, None when not or when :attr:`keep_half_depth` is
+        off); None otherwise, and what was kept for the camera is released."""
         kept = self._half_depth.get(view.camera_entity)
         if kept is not None and (key is None or kept.texture.size != size):
             self._half_depth.pop(view.camera_entity).texture.release()
@@ -464,7 +463,6 @@ class EnergyWaveFeature(RenderFeature):
             return None
         if kept is None:
             kept = self._half_depth[view.camera_entity] = _KeptDepth(self.ctx.depth_texture(size))
-        kept.wanted = key
         return kept
 
     def release(self) -> None:
