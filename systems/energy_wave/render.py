@@ -23,7 +23,7 @@ The glow of a frame uses the largest ``glow`` and ``glow_radius`` among the emit
 
 When every emitter drawn in a view shares one colour pair (``color``, ``core_color``), the buffers hold two
 channels instead of RGB: a sprite's colour ``mix(color, core, g²) · g·I`` is ``color · g·I + (core - color) ·
-g³·I``, linear in the two weights, so the buffers (rg16f) sum ``g·I`` and ``g³·I`` and the layer's matrix applies
+g³·I``, linear in the two weights, so the buffers (rg32f) sum ``g·I`` and ``g³·I`` and the layer's matrix applies
 the colours once per pixel. Half the channels of additive half-float blending per sprite fragment: table 4.3's
 case 4 went from 45.4 to 37.4 ms a frame (alternating runs in one process); pictures within 1/255.
 
@@ -60,9 +60,12 @@ PARTICLE_DOWNSCALE = 2  # sprites are drawn at half the view's resolution (off-s
 GLOW_DOWNSCALE = 4
 # The particle and glow buffers' formats: RGB sums of the sprites' colours, or, when every emitter drawn in the view
 # shares one colour pair (colour and core colour), the two weights that pair's colours multiply (particles.frag
-# TWO_CHANNEL). Two channels of additive half-float blending per fragment instead of four: the sprite pass of
-# table 4.3's case 4 went from 22.4 to 17.7 ms (rg16f; rg32f 16.5) in alternating runs on llvmpipe.
-COLOR_FORMAT, PAIR_FORMAT = "rgba16f", "rg16f"
+# TWO_CHANNEL). Two channels of additive blending per fragment instead of four: the sprite pass of table 4.3's
+# case 4 went from 22.4 to 17.7 ms (rg16f; rg32f 16.5) in alternating runs on llvmpipe. Single floats, not half
+# floats: llvmpipe converts every half-float texel it blends, fetches or filters, and the whole case-4 frame
+# measured 33.9 -> 30.8, 31.7 -> 30.8 and 43.4 -> 41.8 ms (rg16f -> rg32f; rgba16f -> rgba32f 45.6 -> 43.9 and
+# 43.2 -> 42.1 ms), alternating blocks of frames in one process; 1.8 MB instead of 0.9 MB at 1280 x 720.
+COLOR_FORMAT, PAIR_FORMAT = "rgba32f", "rg32f"
 QUAD_INDICES = np.array([0, 1, 2, 2, 1, 3], np.uint32)  # a sprite's two triangles over its four corners
 UV = tuple[float, float, float, float]  # (u0, v0, u1, v1) in a view's texture coordinates
 
