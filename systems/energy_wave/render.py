@@ -14,7 +14,8 @@ fill-rate bound, so they are drawn at half resolution):
 ``energy_wave.sprites.<view>``: every sprite, additively, into a half-resolution HDR buffer; occlusion is the
 hardware depth test (no writes) against a half-resolution depth target that a first full-rectangle draw fills with
 the view's depth (one full-size pixel per particle-buffer pixel) while clearing the colour;
-``energy_wave.glow_blur_x/y.<view>``: a separable Gaussian blur of that buffer at quarter resolution (bloom);
+``energy_wave.glow_blur_x/y.<view>``: a separable Gaussian blur of that buffer at quarter resolution (bloom), its
+nine bilinear taps per axis fetched as pairs of texels where the grids line up (:func:`blur_taps`);
 ``energy_wave.glow_add.<view>``: glow strength × the blurred buffer, upsampled, added into the buffer;
 ``energy_wave.composite.<view>``: the buffer, upsampled, added onto the view's HDR colour: a colour layer
 (:class:`engine.render.feature.ColorLayer`), which the view's tone map adds instead when nothing is drawn over
@@ -145,6 +146,50 @@ def largest_sprite_pixels(data: FrameData, view_proj: np.ndarray, pixels: float,
     if w.min() <= 1e-6:
         return math.inf
     return float((size / w).max() * abs(float(view_proj[1, 1])) * pixels)
+
+
+GAUSS_9 = (0.2270270270, 0.1945945946, 0.1216216216, 0.0540540541, 0.0162162162)  # glow_blur.frag's weights, |j|
+
+
+def blur_taps(radius: float, source: int, target: int) -> tuple[np.ndarray, np.ndarray]:
+    """The bilinear fetches of one blur direction (glow_blur.frag): offsets from the output pixel's centre in
+    source texels, and weights.  The blur is nine taps j = -4..4 at ``j · radius / 4`` target texels with weights
+    GAUSS_9, each filtered bilinearly.  When ``source`` is ``target`` or ``2 · target`` texels long, the output
+    pixels' centres all have the same phase in the source's texel grid (half way between texel centres, or on
+    one), so the nine taps add up to one discrete kernel over a few source texels; pairs of adjacent texels of
+    it are fetched together, bilinearly at the point that splits them by their weights (Rákos 2010's "linear
+    sampling"), which gives the same sum with about half the fetches.  Otherwise, or when pairing saves
+    nothing, the nine taps themselves."""
+    step = radius / 4.0 * source / target  # tap spacing in source texels
+    taps = np.arange(-4, 5) * step
+    weights = np.array([GAUSS_9[abs(j)] for j in range(-4, 5)])
+    ratio = source / target
+    if ratio not in (1.0, 2.0):
+        return taps, weights
+    phase = 0.5 if ratio == 2.0 else 0.0  # the output centre, past the source texel centre before it
+    kernel: dict[int, float] = {}
+    for t, w in zip(phase + taps, weights):  # each tap's bilinear weights on the source texels (relative)
+        k = math.floor(t)
+        f = t - k
+        kernel[k] = kernel.get(k, 0.0) + (1.0 - f) * w
+        if f > 0.0:
+            kernel[k + 1] = kernel.get(k + 1, 0.0) + f * w
+    texels = sorted(k for k, w in kernel.items() if w > 0.0)
+    offsets, sums, i = [], [], 0
+    while i < len(texels):
+        k = texels[i]
+        if i + 1 < len(texels) and texels[i + 1] == k + 1:  # two adjacent texels: one fetch between them
+            w0, w1 = kernel[k], kernel[k + 1]
+            offsets.append(k + w1 / (w0 + w1) - phase)
+            sums.append(w0 + w1)
+            i += 2
+        else:
+            offsets.append(k - phase)
+            sums.append(kernel[k])
+            i += 1
+    if len(offsets) >= len(taps):
+        return taps, weights
+    return np.array(offsets), np.array(sums)
 
 
 def _grow(rect: UV, du: float, dv: float) -> UV:
@@ -420,11 +465,17 @@ class EnergyWaveFeature(RenderFeature):
                 fbo.scissor = pixel_rect(rects[dst_key], *glow_size)
                 fbo.use()
                 ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
-                vao = self._fullscreen_vao("glow_blur")
-                pc.get(h[src_key]).use(0)
-                step = [0.0, 0.0]
-                step[axis] = (radius / 4.0) / glow_size[axis]
-                set_uniforms(vao.program, source=0, step_uv=tuple(step))
+                source = pc.get(h[src_key])
+                source.use(0)
+                texel = [0.0, 0.0]
+                texel[axis] = 1.0 / source.size[axis]
+                offsets, weights = blur_taps(radius, source.size[axis], glow_size[axis])
+                taps = f"TAPS {len(offsets)}"
+                vao = self._cached_vao(self._fullscreen, ("glow_blur", taps), self._program("glow_blur", (taps,)))
+                prog = vao.program
+                set_uniforms(prog, source=0, axis_uv=tuple(texel))
+                prog["offsets"].write(offsets.astype(np.float32).tobytes())
+                prog["weights"].write(weights.astype(np.float32).tobytes())
                 try:
                     vao.render(moderngl.TRIANGLES, vertices=3)
                 finally:

@@ -452,3 +452,85 @@ def test_the_composite_is_folded_into_the_tone_map_with_the_same_picture(tmp_pat
     assert folded == {True: True, False: False}
     diff = np.abs(pictures[True] - pictures[False])
     assert diff.max() <= 1 and (pictures[True].mean(axis=2) > 150).sum() > 300
+
+
+def _bilinear_1d(signal: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Linear filtering of a 1-D texture (texel k centred at k + 0.5) at texel coordinates ``x``, clamped."""
+    t = x - 0.5
+    k = np.floor(t).astype(int)
+    f = t - k
+    last = len(signal) - 1
+    return (1.0 - f) * signal[np.clip(k, 0, last)] + f * signal[np.clip(k + 1, 0, last)]
+
+
+@pytest.mark.parametrize("radius", [0.5, 1.0, 2.0, 3.0, 4.5, 8.0])
+@pytest.mark.parametrize("ratio", [1, 2])
+def test_paired_blur_taps_sum_what_the_nine_bilinear_taps_sum(radius, ratio):
+    """blur_taps' paired fetches against the nine taps of glow_blur.frag, each filtered bilinearly, on a random
+    signal (the edges clamped, as the buffers are): the same values; radius 2 needs 5 fetches downsampling from
+    the particle buffer and 3 along y."""
+    from systems.energy_wave.render import GAUSS_9, blur_taps
+
+    rng = np.random.default_rng(7)
+    target = 40
+    signal = rng.random(target * ratio)
+    centres = (np.arange(target) + 0.5) * ratio  # output pixel centres in source texels
+    step = radius / 4.0 * ratio
+    reference = sum(GAUSS_9[abs(j)] * _bilinear_1d(signal, centres + j * step) for j in range(-4, 5))
+    offsets, weights = blur_taps(radius, target * ratio, target)
+    paired = sum(w * _bilinear_1d(signal, centres + o) for o, w in zip(offsets, weights))
+    assert np.allclose(paired, reference, rtol=0, atol=1e-12)
+    assert len(offsets) <= 9
+    if radius == 2.0:
+        assert len(offsets) == (5 if ratio == 2 else 3)
+
+
+def test_blur_taps_fall_back_to_nine_when_the_grids_do_not_line_up():
+    from systems.energy_wave.render import blur_taps
+
+    offsets, weights = blur_taps(2.0, 639, 319)
+    assert len(offsets) == 9 and np.isclose(weights.sum(), 1.0)
+    assert np.allclose(offsets, np.arange(-4, 5) * 0.5 * 639 / 319)
+
+
+def _bilinear_2d(image: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
+    """``image`` (rows, columns, channels) filtered linearly at the grid ``ys`` × ``xs`` (texel coordinates),
+    clamped at the edges."""
+    for axis, x in ((0, ys), (1, xs)):
+        t = x - 0.5
+        k = np.floor(t).astype(int)
+        f = np.expand_dims(t - k, tuple(a for a in range(3) if a != axis))
+        last = image.shape[axis] - 1
+        image = ((1.0 - f) * np.take(image, np.clip(k, 0, last), axis=axis)
+                 + f * np.take(image, np.clip(k + 1, 0, last), axis=axis))
+    return image
+
+
+def test_the_glow_buffer_is_the_nine_tap_gaussian_of_the_particle_buffer(tmp_path, monkeypatch):
+    """The glow the bloom adds (blur_y, read back when glow_add runs) against the nine bilinear taps per axis of
+    glow_blur.frag computed here from the particle buffer: the paired fetches (160 x 120: buffers 80 x 60 and
+    40 x 30, the grids line up) give the same buffer; the passes cover whole targets (bounds = the view)."""
+    from systems.energy_wave import render
+
+    seen = {}
+
+    def spy(renderer, target, texture, matrix, region):
+        seen["particles"] = np.frombuffer(target.read(), np.float32).reshape(target.height, target.width, -1)
+        seen["glow"] = np.frombuffer(texture.read(), np.float32).reshape(texture.height, texture.width, -1)
+        return add_texture(renderer, target, texture, matrix, region)
+
+    add_texture = render.add_texture
+    monkeypatch.setattr(render, "add_texture", spy)
+    monkeypatch.setattr(render, "sprite_bounds", lambda *args: (0.0, 0.0, 1.0, 1.0))
+    radius = 3.0
+    _render(tmp_path, "reference", extra=f"glow_radius = {radius}")
+    particles, glow = seen["particles"].astype(np.float64), seen["glow"]
+    assert particles.shape[:2] == (60, 80) and glow.shape[:2] == (30, 40) and particles.max() > 0.1
+    weights = [render.GAUSS_9[abs(j)] for j in range(-4, 5)]
+    centre_x, centre_y = (np.arange(40) + 0.5) * 2, (np.arange(30) + 0.5) * 2  # glow texels in particle texels
+    blur_x = sum(w * _bilinear_2d(particles, centre_x + j * radius / 2, centre_y) for j, w in zip(range(-4, 5), weights))
+    rows = np.arange(30) + 0.5
+    expected = sum(w * _bilinear_2d(blur_x, np.arange(40) + 0.5, rows + j * radius / 4)
+                   for j, w in zip(range(-4, 5), weights))
+    assert np.abs(glow - expected).max() <= 1e-4 * particles.max()
+    assert render.blur_taps(radius, 80, 40)[0].size < 9 and render.blur_taps(radius, 30, 30)[0].size < 9
