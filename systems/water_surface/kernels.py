@@ -1212,3 +1212,59 @@ def outline_step(z, zp, k, degree, new, rotated, shapes, position, radius, plane
         small[m + i] = 1 if raised[i] else 0
         small[2 * m + i] = 1 if lowered[i] else 0
     return floats, ints, small, mask, m, n_seg, n_solid, n_unique, width
+
+
+# ------------------------------------------------------------------------------------------------ render extract
+@kernel
+def vertex_records(heights, h, x0, z0, y0, point_uv, point_heights):
+    """``mesh.vertex_arrays`` packed for the GPU in one pass: float32 rows (x, y, z, nx, ny, nz), the grid vertices
+    (row-major) then the added points; the same float64 arithmetic in the same order (``np.gradient``'s central
+    differences inside and one-sided ones on the border, the bilinear slope at the added points, the normal
+    divided by its length), rounded to float32 at the end, as ``np.concatenate(...).astype(np.float32)`` does."""
+    nz, nx = heights.shape
+    points = point_uv.shape[0]
+    out = np.empty((nz * nx + points, 6), np.float32)
+    for j in range(nz):
+        for i in range(nx):
+            if i == 0:
+                dx = (heights[j, 1] - heights[j, 0]) / h
+            elif i == nx - 1:
+                dx = (heights[j, nx - 1] - heights[j, nx - 2]) / h
+            else:
+                dx = (heights[j, i + 1] - heights[j, i - 1]) / (2.0 * h)
+            if j == 0:
+                dz = (heights[1, i] - heights[0, i]) / h
+            elif j == nz - 1:
+                dz = (heights[nz - 1, i] - heights[nz - 2, i]) / h
+            else:
+                dz = (heights[j + 1, i] - heights[j - 1, i]) / (2.0 * h)
+            row = out[j * nx + i]
+            row[0] = x0 + i * h
+            row[1] = y0 + heights[j, i]
+            row[2] = z0 + j * h
+            _unit_normal(row, -dx, -dz)
+    for p in range(points):
+        u = min(max(point_uv[p, 0], 0.0), nx - 1)
+        v = min(max(point_uv[p, 1], 0.0), nz - 1)
+        i = min(int(u), nx - 2)
+        j = min(int(v), nz - 2)
+        tu, tv = u - i, v - j
+        z00, z10 = heights[j, i], heights[j, i + 1]
+        z01, z11 = heights[j + 1, i], heights[j + 1, i + 1]
+        du = (1.0 - tv) * (z10 - z00) + tv * (z11 - z01)
+        dv = (z01 + tu * (z11 - z01)) - (z00 + tu * (z10 - z00))
+        row = out[nz * nx + p]
+        row[0] = point_uv[p, 0] * h + x0
+        row[1] = y0 + point_heights[p]
+        row[2] = point_uv[p, 1] * h + z0
+        _unit_normal(row, -du / h, -dv / h)
+    return out
+
+
+@kernel(inline="always")
+def _unit_normal(row, a, c):
+    """(a, 1, c) / |(a, 1, c)| into ``row[3:6]`` (the length summed x² + y² + z², as ``np.linalg.norm`` does)."""
+    length = math.sqrt(a * a + 1.0 + c * c)
+    row[3] = a / length
+    row[4] = 1.0 / length
+    row[5] = c / length

@@ -124,6 +124,25 @@ def test_vertex_and_wire_arrays():
     assert wire.shape == (2 * (3 * len(mesh.triangles) + len(mesh.outline)), 6)
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_compiled_vertex_records_are_the_numpy_arrays_bits(seed):
+    """kernels.vertex_records (what the renderer uploads) against vertex_arrays concatenated and rounded to
+    float32: the same bits, over random waves, added points on and off the grid, a grid not at the origin."""
+    from systems.water_surface.kernels import vertex_records
+
+    rng = np.random.default_rng(seed)
+    pts, _ = _mesh(box(0.1 + 0.05 * seed, 0.2, yaw=0.3 * seed))
+    heights = rng.normal(0.0, 0.05, (26, 26))
+    uv = np.concatenate([pts.uv, [[0.0, 0.0], [25.0, 25.0], [-0.5, 3.2], [12.5, 30.0]]])
+    point_heights = rng.normal(0.0, 0.05, len(uv))
+    grid = make_grid(26, 0.4)
+    grid = type(grid)(grid.nx, grid.nz, grid.h, grid.x0 - 3.7, grid.z0 + 1.3, grid.y0 + 0.25)
+    positions, normals = vertex_arrays(grid, heights, uv, point_heights)
+    expected = np.concatenate([positions, normals], axis=1).astype(np.float32)
+    got = vertex_records(heights, grid.h, grid.x0, grid.z0, grid.y0, uv, point_heights)
+    assert got.dtype == np.float32 and np.array_equal(got, expected)
+
+
 def test_the_checks_catch_a_missing_outline_segment_an_overlap_and_a_hole():
     pts, mesh = _mesh(box(0.1, 0.2, yaw=0.3))
     uv = np.concatenate([np.stack(np.meshgrid(np.arange(26.0), np.arange(26.0)), -1).reshape(-1, 2), pts.uv])
