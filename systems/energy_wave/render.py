@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -151,6 +152,7 @@ def largest_sprite_pixels(data: FrameData, view_proj: np.ndarray, pixels: float,
 GAUSS_9 = (0.2270270270, 0.1945945946, 0.1216216216, 0.0540540541, 0.0162162162)  # glow_blur.frag's weights, |j|
 
 
+@lru_cache(maxsize=32)
 def blur_taps(radius: float, source: int, target: int) -> tuple[np.ndarray, np.ndarray]:
     """The bilinear fetches of one blur direction (glow_blur.frag): offsets from the output pixel's centre in
     source texels, and weights.  The blur is nine taps j = -4..4 at ``j · radius / 4`` target texels with weights
@@ -159,7 +161,7 @@ def blur_taps(radius: float, source: int, target: int) -> tuple[np.ndarray, np.n
     one), so the nine taps add up to one discrete kernel over a few source texels; pairs of adjacent texels of
     it are fetched together, bilinearly at the point that splits them by their weights (Rákos 2010's "linear
     sampling"), which gives the same sum with about half the fetches.  Otherwise, or when pairing saves
-    nothing, the nine taps themselves."""
+    nothing, the nine taps themselves.  Cached: the arrays returned are shared, read them only."""
     step = radius / 4.0 * source / target  # tap spacing in source texels
     taps = np.arange(-4, 5) * step
     weights = np.array([GAUSS_9[abs(j)] for j in range(-4, 5)])
