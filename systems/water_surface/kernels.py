@@ -173,6 +173,23 @@ def _bilinear(f, nx, nz, u, v):
     return bottom + tv * (top - bottom)
 
 
+@kernel(inline="always")
+def _bilinear_slope(f, u, v):
+    """geometry.bilinear_with_slope at one point, ``f`` 2-D: the derivatives ∂/∂u, ∂/∂v per grid unit (clamped to
+    the grid as :func:`_bilinear`)."""
+    nz, nx = f.shape
+    cu = min(max(u, 0.0), nx - 1)
+    cv = min(max(v, 0.0), nz - 1)
+    i = min(int(cu), nx - 2)
+    j = min(int(cv), nz - 2)
+    tu = cu - i
+    tv = cv - j
+    z00, z10 = f[j, i], f[j, i + 1]
+    z01, z11 = f[j + 1, i], f[j + 1, i + 1]
+    du = (1.0 - tv) * (z10 - z00) + tv * (z11 - z01)
+    return du, (z01 + tu * (z11 - z01)) - (z00 + tu * (z10 - z00))
+
+
 @kernel
 def plane_levels(z, solid, centre, half):
     """S'_z − y0 of each body (``surface.plane_levels``, section 2.2.2): the mean height of the water vertices in
@@ -1244,15 +1261,7 @@ def vertex_records(heights, h, x0, z0, y0, point_uv, point_heights):
             row[2] = z0 + j * h
             _unit_normal(row, -dx, -dz)
     for p in range(points):
-        u = min(max(point_uv[p, 0], 0.0), nx - 1)
-        v = min(max(point_uv[p, 1], 0.0), nz - 1)
-        i = min(int(u), nx - 2)
-        j = min(int(v), nz - 2)
-        tu, tv = u - i, v - j
-        z00, z10 = heights[j, i], heights[j, i + 1]
-        z01, z11 = heights[j + 1, i], heights[j + 1, i + 1]
-        du = (1.0 - tv) * (z10 - z00) + tv * (z11 - z01)
-        dv = (z01 + tu * (z11 - z01)) - (z00 + tu * (z10 - z00))
+        du, dv = _bilinear_slope(heights, point_uv[p, 0], point_uv[p, 1])
         row = out[nz * nx + p]
         row[0] = point_uv[p, 0] * h + x0
         row[1] = y0 + point_heights[p]
