@@ -272,6 +272,8 @@ class ToonSmokeState:
     mesh_normals: np.ndarray | None = _derived()  # (V, 3) float32, outward = −∇ρ/|∇ρ|
     mesh_faces: np.ndarray | None = _derived()  # (F, 3) uint32
     mesh_version: int = field(default=0, metadata={"hash": False})
+    # the value of ``steps`` the display grid and mesh were derived at (-1: never, or to be re-derived)
+    display_step: int = field(default=-1, metadata={"hash": False})
     divergence_before: float = field(default=0.0, metadata={"hash": False})  # max |∇·u| (1/s) before projection
     divergence_after: float = field(default=0.0, metadata={"hash": False})  # … and after
     pressure_iterations_used: int = field(default=0, metadata={"hash": False})

@@ -5,7 +5,8 @@
     print(app.state_hash())
 
 A tick runs the input, script, simulation and post-simulation stages, applying deferred commands
-after every system (the sync points) and advancing the event buffers at its end.  Frames
+after every system (the sync points) and advancing the event buffers at its end; after a batch of ticks
+(:meth:`step`) the frame-update stage runs once (display-only state, engine/schedule.py).  Frames
 (:meth:`advance`) run as many ticks as the accumulator holds, then render-extract and render when a
 renderer is attached.
 """
@@ -135,9 +136,12 @@ class App:
         self.renderer = renderer
 
     def step(self, n: int = 1) -> None:
-        """Run exactly ``n`` ticks (the manual clock)."""
-        for _ in range(int(n)):
+        """Run exactly ``n`` ticks (the manual clock), then the frame-update stage once (when ``n`` >= 1)."""
+        n = int(n)
+        for _ in range(n):
             self.tick()
+        if n > 0:
+            self._run_stage(Stage.FRAME_UPDATE)
 
     def advance(self, real_dt: float) -> int:
         """One frame: the ticks the accumulator allows and rendering. Returns the ticks run.

@@ -5,7 +5,10 @@ constraints (by name) with a topological sort whose ties are broken by registrat
 raises :class:`ScheduleError` naming the systems in it.
 
 The game-logic stages (input, script, simulation, post-simulation) run once per fixed tick so that a
-recorded input stream replays exactly; render-extract and render run once per displayed frame.
+recorded input stream replays exactly; render-extract and render run once per displayed frame.  Between them,
+frame-update runs once after each batch of ticks (:meth:`engine.app.App.step`, which a frame's ticks are): the
+place for state derived from the simulation only to be drawn (a display grid, a mesh), which would otherwise be
+re-derived on every tick of a frame and thrown away; nothing the ticks read may come from it.
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ class Stage(str, Enum):
     SCRIPT = "script"
     SIMULATION = "simulation"
     POST_SIMULATION = "post_simulation"
+    FRAME_UPDATE = "frame_update"
     RENDER_EXTRACT = "render_extract"
     RENDER = "render"
 
@@ -86,6 +90,8 @@ class Schedule:
                 note = " (once)"
             elif stage in FRAME_STAGES:
                 note = " (per frame)"
+            elif stage is Stage.FRAME_UPDATE:
+                note = " (once after each batch of ticks)"
             lines.append(f"{stage.value}{note}:")
             lines.extend(f"  {i + 1}. {n}" for i, n in enumerate(names))
         return "\n".join(lines)

@@ -1,7 +1,8 @@
 """The toon_smoke effect plugin: cartoon smoke and clouds (Kuroda, Dobashi & Yamamoto, seeds/002).
 
 Registers the ``ToonSmokeVolume`` component (presets in configs/effects/toon_smoke/), the simulation system
-(stable fluids + particles + noise on the display grid), the meshing system (marching cubes every step), the
+(stable fluids + particles, every tick), the display system (display grid with blobs and noise, and marching
+cubes: once per frame, after the frame's ticks), the
 script commands ``toon_smoke.set_source`` and ``toon_smoke.puff`` (and the ``toon_smoke_puffer`` script that fires
 puffs on a timer), and the render feature (toon-ramp isosurface and
 outline passes), which is imported lazily so that simulation never imports GL.
@@ -14,7 +15,7 @@ from engine.registry import Registry
 from engine.schedule import Stage
 from systems.toon_smoke.commands import puff, set_source
 from systems.toon_smoke.scripts import SCRIPTS
-from systems.toon_smoke.simulate import mesh_system, simulate_system
+from systems.toon_smoke.simulate import display_system, simulate_system
 
 
 # Hot reload.  Structural: the grids' shapes (simulation and display resolution), the cell size and every
@@ -34,6 +35,7 @@ def live_update(old: ToonSmokeVolumeConfig, new: ToonSmokeVolumeConfig, world, e
     state = world.try_get(entity, ToonSmokeState)
     if state is None:
         return
+    state.display_step = -1  # re-derive the display grid and mesh with the new values, even while paused
     if any(getattr(old, k) != getattr(new, k) for k in _OBSTACLE_KEYS):
         state.solid_key = None  # update_obstacles rebuilds the masks and the hierarchy at the next step
         state.noise_factor = state.noise_key = None  # the noise is masked with the display solid
@@ -60,7 +62,7 @@ class ToonSmokePlugin:
         registry.add_component("ToonSmokeVolume", ToonSmokeVolumeConfig, build_toon_smoke, preset_dir="toon_smoke",
                                structural=STRUCTURAL, live_update=live_update)
         registry.add_system(simulate_system, Stage.SIMULATION, name="toon_smoke.simulate")
-        registry.add_system(mesh_system, Stage.POST_SIMULATION, name="toon_smoke.mesh")
+        registry.add_system(display_system, Stage.FRAME_UPDATE, name="toon_smoke.display")
         registry.add_command("toon_smoke.set_source", set_source)
         registry.add_command("toon_smoke.puff", puff)
         registry.add_scripts(SCRIPTS)

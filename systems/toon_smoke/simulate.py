@@ -3,11 +3,17 @@ times one by one):
 
 1. :func:`update_obstacles` — solid cells from the volume's own sphere and other colliders;
 2. :func:`velocity_step`, :func:`projection_step`, :func:`scalar_step` — stable fluids on the simulation grid (§3.1);
-3. :func:`upsample_step`, :func:`advect_particles`, :func:`blob_step`, :func:`noise_step` — the display grid
-   (§3.2), particles and blobs (§3.3), noise (§3.4);
-4. :func:`mesh_step` — the isosurface at D_iso (§3.5), re-meshed every step.
+3. :func:`advect_particles` — the particles (§3.3);
+4. :func:`upsample_step`, :func:`blob_step`, :func:`noise_step` — the display grid (§3.2), blobs (§3.3) and
+   noise (§3.4);
+5. :func:`mesh_step` — the isosurface at D_iso (§3.5).
 
-Systems: ``toon_smoke.simulate`` (phases 1–3, simulation stage) and ``toon_smoke.mesh`` (phase 4, post-simulation).
+Phases 1–3 (:data:`SIMULATION_PHASES`) advance the state; 4 and 5 derive what is drawn from it and feed nothing
+back: the display grid is rebuilt from ρ, the particles and the fixed noise every time.  So the systems split
+them by rate: ``toon_smoke.simulate`` runs 1–3 on every fixed tick (simulation stage), ``toon_smoke.display``
+runs 4–5 once per frame, after the frame's ticks (frame-update stage), and only when a tick ran since it last
+did.  When the frame rate is below the tick rate (three ticks a frame at 20 fps) the display work is done once
+instead of three times, and the picture is the same: it shows the state after the frame's last tick.
 """
 
 from __future__ import annotations
@@ -294,14 +300,6 @@ def noise_step(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState) -> None:
     np.minimum(display, np.float32(cfg.density_limit), out=display)  # every term is ≥ 0 already
 
 
-def display_step(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, dt: float, rng: np.random.Generator) -> None:
-    """Display density = noise × (upsampled ρ + particle blobs), clamped to [0, density_limit] (§3.2–3.4)."""
-    upsample_step(cfg, state)
-    advect_particles(cfg, state, dt, rng)
-    blob_step(cfg, state)
-    noise_step(cfg, state)
-
-
 def _masked_noise(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, geo: Geometry) -> np.ndarray:
     """The noise factor of §3.4 (computed once: it depends on position alone), zeroed in solid display cells."""
     key = ("noise", state.noise_seed, state.solid_key)
@@ -368,37 +366,56 @@ def _up_local(ctx: StepContext) -> np.ndarray:
     return quat_rotate(quat_conjugate(ctx.transform.rotation), _UP)
 
 
-# The phases of one step, in order (seeds/002 figure 1); the benchmark times each one.
-PHASES: tuple[tuple[str, Callable[[StepContext], None]], ...] = (
+# The phases of one step, in order (seeds/002 figure 1); the benchmark times each one.  The simulation phases
+# advance the state; the display phases derive the display grid from it (see the module docstring).
+SIMULATION_PHASES: tuple[tuple[str, Callable[[StepContext], None]], ...] = (
     ("obstacles", lambda c: update_obstacles(c.world, c.entity, c.transform, c.cfg, c.state)),
     ("velocity (advect, forces, sources)", lambda c: velocity_step(c.cfg, c.state, c.dt, _up_local(c), c.rng)),
     ("pressure projection (MGPCG)", lambda c: projection_step(c.cfg, c.state)),
     ("density + temperature", lambda c: scalar_step(c.cfg, c.state, c.dt)),
-    ("upsample to display grid", lambda c: upsample_step(c.cfg, c.state)),
     ("particles", lambda c: advect_particles(c.cfg, c.state, c.dt, c.rng)),
+)
+DISPLAY_PHASES: tuple[tuple[str, Callable[[StepContext], None]], ...] = (
+    ("upsample to display grid", lambda c: upsample_step(c.cfg, c.state)),
     ("density blobs", lambda c: blob_step(c.cfg, c.state)),
     ("noise", lambda c: noise_step(c.cfg, c.state)),
 )
+PHASES = SIMULATION_PHASES + DISPLAY_PHASES
 
 
 def step_volume(world: World | None, entity: int, transform: Transform, cfg: ToonSmokeVolumeConfig,
-                state: ToonSmokeState, dt: float, rng: np.random.Generator) -> None:
-    """Every phase of :data:`PHASES` for one volume and one step of ``dt`` seconds."""
+                state: ToonSmokeState, dt: float, rng: np.random.Generator, display: bool = True) -> None:
+    """One step of ``dt`` seconds for one volume: :data:`SIMULATION_PHASES`, then (``display``) the display grid
+    (:data:`DISPLAY_PHASES`; the mesh is :func:`mesh_step`)."""
     ctx = StepContext(world, entity, transform, cfg, state, dt, rng)
-    for _, phase in PHASES:  # loop over the phases of the step
+    for _, phase in SIMULATION_PHASES:  # loop over the phases of the step
         phase(ctx)
     state.time += dt
     state.steps += 1
+    if display:
+        display_grid(cfg, state)
+
+
+def display_grid(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState) -> None:
+    """Display density = noise × (upsampled ρ + particle blobs), clamped to [0, density_limit] (§3.2–3.4): the
+    :data:`DISPLAY_PHASES` for the current state."""
+    upsample_step(cfg, state)
+    blob_step(cfg, state)
+    noise_step(cfg, state)
 
 
 def simulate_system(world: World, dt: float) -> None:
-    """Simulation stage: step every ToonSmokeVolume (ascending entity id)."""
+    """Simulation stage: step every ToonSmokeVolume (ascending entity id); the display is derived per frame."""
     for entity, (transform, cfg, state) in world.query(Transform, ToonSmokeVolumeConfig, ToonSmokeState):
         step_volume(world, entity, transform, cfg, state, time_step(cfg, dt),
-                    world.random.stream("toon_smoke", entity))
+                    world.random.stream("toon_smoke", entity), display=False)
 
 
-def mesh_system(world: World, dt: float) -> None:
-    """Post-simulation stage: extract every volume's isosurface."""
+def display_system(world: World, dt: float) -> None:
+    """Frame-update stage: the display grid and isosurface of every volume stepped (or reconfigured) since they
+    were last derived."""
     for _, (cfg, state) in world.query(ToonSmokeVolumeConfig, ToonSmokeState):
-        mesh_step(cfg, state)
+        if state.display_step != state.steps and state.steps > 0:
+            display_grid(cfg, state)
+            mesh_step(cfg, state)
+            state.display_step = state.steps

@@ -116,7 +116,7 @@ def test_noise_depends_on_position_alone():
     base = upsample_linear(state.density, geo.factor)
     assert np.allclose(state.display_density, np.minimum(base * expected, cfg.density_limit), atol=1e-5)
     first = state.noise_factor.copy()
-    simulate.display_step(cfg, state, 1 / 30, np.random.default_rng(0))
+    simulate.display_grid(cfg, state)
     assert np.array_equal(state.noise_factor, first)  # the same factor at every step
 
 

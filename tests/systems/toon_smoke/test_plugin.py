@@ -4,8 +4,11 @@ import numpy as np
 import pytest
 
 from components.toon_smoke import ToonSmokeState, ToonSmokeVolumeConfig
+from engine.app import TimeControl
 from engine.config import ConfigError
 from engine.registry import default_registry
+from engine.schedule import Stage
+from systems.toon_smoke import live_update, simulate
 from tests.systems.toon_smoke.helpers import make_app, scene_text
 
 SMALL = """simulation_resolution = [16, 16, 16]
@@ -37,7 +40,9 @@ def test_plugin_registers_component_systems_commands_and_script():
     registry = default_registry(["toon_smoke"])
     assert registry.component("ToonSmokeVolume").preset_dir == "toon_smoke"
     names = [name for _, names in registry.schedule.order() for name in names]
-    assert names.index("toon_smoke.simulate") < names.index("toon_smoke.mesh")
+    assert names.index("toon_smoke.simulate") < names.index("toon_smoke.display")
+    stages = {name: stage for stage, names in registry.schedule.order() for name in names}
+    assert stages["toon_smoke.simulate"] is Stage.SIMULATION and stages["toon_smoke.display"] is Stage.FRAME_UPDATE
     assert {"toon_smoke.set_source", "toon_smoke.puff"} <= set(registry.commands)
     assert "toon_smoke_puffer" in registry.scripts
 
@@ -63,14 +68,51 @@ def test_snapshot_restore_continues_bit_identically(tmp_path):
     assert app.state_hash() == expected
 
 
-def test_mesh_is_rebuilt_every_step(tmp_path):
+def test_mesh_is_rebuilt_once_per_batch_of_ticks_from_the_last_state(tmp_path):
+    """The display grid and mesh are derived once after a frame's ticks (the frame-update stage), not per tick."""
     app = small_app(tmp_path)
     app.step(20)
-    _, (_, state) = _volume(app)
+    _, (cfg, state) = _volume(app)
     version = state.mesh_version
     assert len(state.mesh_faces) > 0
     app.step(3)
-    assert state.mesh_version == version + 3
+    assert state.mesh_version == version + 1
+    for _ in range(3):
+        app.step(1)
+    assert state.mesh_version == version + 4
+    app.step(0)
+    assert state.mesh_version == version + 4
+    # what was derived is the display of the last tick's state, as a step that derives it directly gives it
+    shown, faces = state.display_density.copy(), state.mesh_faces.copy()
+    simulate.display_grid(cfg, state)
+    simulate.mesh_step(cfg, state)
+    assert np.array_equal(shown, state.display_density) and np.array_equal(faces, state.mesh_faces)
+
+
+def test_one_batch_or_single_ticks_give_the_same_state_and_picture(tmp_path):
+    batched, single = small_app(tmp_path, seed=3), small_app(tmp_path, seed=3)
+    batched.step(12)
+    for _ in range(12):
+        single.step(1)
+    assert batched.state_hash() == single.state_hash()
+    a, b = _volume(batched)[1][1], _volume(single)[1][1]
+    assert np.array_equal(a.display_density, b.display_density)
+    assert np.array_equal(a.mesh_vertices, b.mesh_vertices) and np.array_equal(a.mesh_faces, b.mesh_faces)
+
+
+def test_a_config_change_while_paused_re_derives_the_mesh(tmp_path):
+    app = small_app(tmp_path)
+    app.step(20)
+    entity, (cfg, state) = _volume(app)
+    version = state.mesh_version
+    app.world.resource(TimeControl).paused = True
+    app.step(1)  # paused: no simulation, nothing to re-derive
+    assert state.mesh_version == version
+    new = cfg.model_copy(update={"iso_density": cfg.iso_density * 2})
+    app.world.add(entity, new)  # as the hot reloader swaps a config in place
+    live_update(cfg, new, app.world, entity)
+    app.step(1)
+    assert state.mesh_version == version + 1
 
 
 def test_set_source_switches_emission(tmp_path):
