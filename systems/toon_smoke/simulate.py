@@ -375,11 +375,13 @@ SIMULATION_PHASES: tuple[tuple[str, Callable[[StepContext], None]], ...] = (
     ("density + temperature", lambda c: scalar_step(c.cfg, c.state, c.dt)),
     ("particles", lambda c: advect_particles(c.cfg, c.state, c.dt, c.rng)),
 )
-DISPLAY_PHASES: tuple[tuple[str, Callable[[StepContext], None]], ...] = (
-    ("upsample to display grid", lambda c: upsample_step(c.cfg, c.state)),
-    ("density blobs", lambda c: blob_step(c.cfg, c.state)),
-    ("noise", lambda c: noise_step(c.cfg, c.state)),
+_DISPLAY: tuple[tuple[str, Callable[[ToonSmokeVolumeConfig, ToonSmokeState], None]], ...] = (
+    ("upsample to display grid", upsample_step),
+    ("density blobs", blob_step),
+    ("noise", noise_step),
 )
+DISPLAY_PHASES: tuple[tuple[str, Callable[[StepContext], None]], ...] = tuple(
+    (name, lambda c, fn=fn: fn(c.cfg, c.state)) for name, fn in _DISPLAY)
 PHASES = SIMULATION_PHASES + DISPLAY_PHASES
 
 
@@ -399,9 +401,8 @@ def step_volume(world: World | None, entity: int, transform: Transform, cfg: Too
 def display_grid(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState) -> None:
     """Display density = noise × (upsampled ρ + particle blobs), clamped to [0, density_limit] (§3.2–3.4): the
     :data:`DISPLAY_PHASES` for the current state."""
-    upsample_step(cfg, state)
-    blob_step(cfg, state)
-    noise_step(cfg, state)
+    for _, phase in _DISPLAY:
+        phase(cfg, state)
 
 
 def simulate_system(world: World, dt: float) -> None:

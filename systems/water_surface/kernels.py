@@ -158,14 +158,19 @@ def wave_bodies(table, radius, terms):
 
 # ----------------------------------------------------------------------------------------------- sampling
 @kernel(inline="always")
-def _bilinear(f, nx, nz, u, v):
-    """geometry.bilinear at one point (eq. 2.2; eq. 2.3/2.4 on a grid edge), ``f`` flat, clamped to the grid."""
+def _cell(nx, nz, u, v):
+    """The grid cell (i, j) holding the point (u, v) clamped to the grid, and the point's fractions (tu, tv) in it."""
     cu = min(max(u, 0.0), nx - 1)
     cv = min(max(v, 0.0), nz - 1)
     i = min(int(cu), nx - 2)
     j = min(int(cv), nz - 2)
-    tu = cu - i
-    tv = cv - j
+    return i, j, cu - i, cv - j
+
+
+@kernel(inline="always")
+def _bilinear(f, nx, nz, u, v):
+    """geometry.bilinear at one point (eq. 2.2; eq. 2.3/2.4 on a grid edge), ``f`` flat, clamped to the grid."""
+    i, j, tu, tv = _cell(nx, nz, u, v)
     c = j * nx + i
     z00, z10, z01, z11 = f[c], f[c + 1], f[c + nx], f[c + nx + 1]
     bottom = z00 + tu * (z10 - z00)
@@ -178,12 +183,7 @@ def _bilinear_slope(f, u, v):
     """geometry.bilinear_with_slope at one point, ``f`` 2-D: the derivatives ∂/∂u, ∂/∂v per grid unit (clamped to
     the grid as :func:`_bilinear`)."""
     nz, nx = f.shape
-    cu = min(max(u, 0.0), nx - 1)
-    cv = min(max(v, 0.0), nz - 1)
-    i = min(int(cu), nx - 2)
-    j = min(int(cv), nz - 2)
-    tu = cu - i
-    tv = cv - j
+    i, j, tu, tv = _cell(nx, nz, u, v)
     z00, z10 = f[j, i], f[j, i + 1]
     z01, z11 = f[j + 1, i], f[j + 1, i + 1]
     du = (1.0 - tv) * (z10 - z00) + tv * (z11 - z01)
