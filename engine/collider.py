@@ -46,6 +46,11 @@ def _first_max(a: F64, b: F64, c: F64) -> NDArray[np.int64]:
     return axis
 
 
+def _is_identity(q: F64) -> bool:
+    """Whether the quaternion is exactly (1, 0, 0, 0)."""
+    return bool(q[0] == 1.0 and q[1] == 0.0 and q[2] == 0.0 and q[3] == 0.0)
+
+
 def _unit(v: F64, fallback: F64) -> F64:
     """Normalize rows of v; rows of zero length become ``fallback``."""
     norm = np.linalg.norm(v, axis=-1, keepdims=True)
@@ -96,7 +101,7 @@ class Collider:
         """Signed distance (N,) from world points to the surface, negative inside (vertical for height fields)."""
         if self.shape == "box":
             return self._box_kernel_query(_points(points, "points"), transform)[0]
-        return self._local_distance(self._to_local(_points(points, "points"), transform), transform)[0]
+        return self._local_signed_distance(self._to_local(_points(points, "points"), transform), transform)
 
     def query(self, points: ArrayLike, transform: Transform) -> tuple[F64, F64]:
         """Penetration depth z = max(0, -signed distance) (N,) and outward unit surface normal (N, 3), world space.
@@ -133,10 +138,17 @@ class Collider:
         return self._ray_cast_numpy(origins, dirs, transform, max_t)
 
     def _ray_cast_numpy(self, origins: F64, dirs: F64, transform: Transform, max_t: float = np.inf) -> RayHits:
-        """:meth:`ray_cast` in numpy, every shape (the reference of the box kernel)."""
-        inverse = quat_conjugate(transform.rotation)
-        o = quat_rotate(inverse, origins - transform.position)
-        d = quat_rotate(inverse, dirs)
+        """:meth:`ray_cast` in numpy, every shape (the reference of the box kernel).
+
+        An unrotated collider skips the rotations (a rotation by the identity returns its input, up to the sign of
+        zeros), and the inside test's normals are computed only for the rays that start inside (usually none):
+        for a height field they cost four more surface lookups per ray."""
+        rotated = not _is_identity(transform.rotation)
+        o = origins - transform.position
+        d = dirs
+        if rotated:
+            inverse = quat_conjugate(transform.rotation)
+            o, d = quat_rotate(inverse, o), quat_rotate(inverse, dirs)
         cast = {
             "box": self._ray_box,
             "sphere": self._ray_sphere,
@@ -144,12 +156,14 @@ class Collider:
             "heightfield": self._ray_heightfield,
         }[self.shape]
         hit, t, normal = cast(o, d, transform, float(max_t))
-        inside_distance, inside_normal = self._local_distance(o, transform)
-        inside = inside_distance < 0.0
+        inside = self._local_signed_distance(o, transform) < 0.0
         hit = hit | inside
         t = np.where(inside, 0.0, np.where(hit, t, np.inf))
-        normal = np.where(inside[:, None], inside_normal, np.where(hit[:, None], normal, 0.0))
-        return hit, t, quat_rotate(transform.rotation, normal)
+        normal = np.where(hit[:, None], normal, 0.0)
+        starts_inside = np.flatnonzero(inside)
+        if starts_inside.size:
+            normal[starts_inside] = self._local_normal(o[starts_inside], transform)
+        return hit, t, quat_rotate(transform.rotation, normal) if rotated else normal
 
     # ------------------------------------------------------------------------------------------ local frame
 
@@ -178,12 +192,27 @@ class Collider:
         """Signed distance (N,) and outward unit normal (N, 3), both in the collider frame."""
         if self.shape == "box":
             return self._box_distance(p, self._box_half_extents(transform))
+        return self._local_signed_distance(p, transform), self._local_normal(p, transform)
+
+    def _local_signed_distance(self, p: F64, transform: Transform) -> F64:
+        """The distance of :meth:`_local_distance` alone."""
+        if self.shape == "box":
+            return self._box_distance(p, self._box_half_extents(transform))[0]
         if self.shape == "sphere":
-            return np.linalg.norm(p, axis=-1) - self._sphere_radius(transform), _unit(p, _UP)
+            return np.linalg.norm(p, axis=-1) - self._sphere_radius(transform)
         if self.shape == "plane":
-            return p @ self.normal - self.offset, np.broadcast_to(self.normal, p.shape).copy()
-        field_ = self.heightfield
-        return p[:, 1] - field_.height_at(p[:, 0], p[:, 2]), field_.normal_at(p[:, 0], p[:, 2])
+            return p @ self.normal - self.offset
+        return p[:, 1] - self.heightfield.height_at(p[:, 0], p[:, 2])
+
+    def _local_normal(self, p: F64, transform: Transform) -> F64:
+        """The normal of :meth:`_local_distance` alone."""
+        if self.shape == "box":
+            return self._box_distance(p, self._box_half_extents(transform))[1]
+        if self.shape == "sphere":
+            return _unit(p, _UP)
+        if self.shape == "plane":
+            return np.broadcast_to(self.normal, p.shape).copy()
+        return self.heightfield.normal_at(p[:, 0], p[:, 2])
 
     @staticmethod
     def _box_distance(p: F64, h: F64) -> tuple[F64, F64]:

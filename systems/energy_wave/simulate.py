@@ -90,19 +90,52 @@ def collider_bounds(collider: Collider, transform: Transform) -> tuple[F64 | Non
     if collider.shape == "sphere":
         r = collider.radius * float(np.max(np.abs(transform.scale)))
         return transform.position - r, transform.position + r
-    if collider.shape == "heightfield" and np.allclose(transform.rotation, (1.0, 0.0, 0.0, 0.0)):
+    if collider.shape == "heightfield" and _near_identity(transform.rotation):
         # Solid below the surface; outside its footprint the field is extruded, so only the top is bounded.
         top = collider.heightfield.height_range[1] + transform.position[1]
         return np.full(3, -np.inf), np.array([np.inf, top, np.inf])
     return None, None
 
 
+def _near_identity(q: F64) -> bool:
+    """``np.allclose(q, (1, 0, 0, 0))`` (|a − b| <= 1e-8 + 1e-5·|b| per entry) on four floats, without its cost."""
+    w, x, y, z = (float(c) for c in q)
+    return abs(w - 1.0) <= 1e-8 + 1e-5 and abs(x) <= 1e-8 and abs(y) <= 1e-8 and abs(z) <= 1e-8
+
+
+class ColliderBoundsCache:
+    """The bounds of box and sphere colliders, per entity, kept while their shape and transform stay the same
+    (most colliders do not move, and every tick's sweep needs them).  Height fields are not cached: a water
+    surface's heights change in place every tick."""
+
+    def __init__(self) -> None:
+        self.entries: dict[int, tuple[tuple, F64 | None, F64 | None]] = {}
+
+    def bounds(self, entity: int, collider: Collider, transform: Transform) -> tuple[F64 | None, F64 | None]:
+        if collider.shape not in ("box", "sphere"):
+            return collider_bounds(collider, transform)
+        key = (id(collider), collider.shape, collider.half_extents.tobytes(), collider.radius,
+               transform.position.tobytes(), transform.rotation.tobytes(), transform.scale.tobytes())
+        cached = self.entries.get(entity)
+        if cached is None or cached[0] != key:
+            cached = (key, *collider_bounds(collider, transform))
+            self.entries[entity] = cached
+        return cached[1], cached[2]
+
+
 def gather_colliders(world: World) -> list[ColliderEntry]:
     """Every entity with Transform + Collider, ascending by entity id (see :func:`hittable` for one emitter's)."""
+    cache = world.try_resource(ColliderBoundsCache)
+    if cache is None:
+        cache = ColliderBoundsCache()
+        world.insert_resource(cache)
     out = []
     for entity, (transform, collider) in world.query(Transform, Collider):
-        lo, hi = collider_bounds(collider, transform)
+        lo, hi = cache.bounds(entity, collider, transform)
         out.append(ColliderEntry(entity, collider, transform, lo, hi))
+    if len(cache.entries) > 2 * len(out) + 16:  # forget despawned entities now and then
+        live = {entry.entity for entry in out}
+        cache.entries = {e: v for e, v in cache.entries.items() if e in live}
     return out
 
 

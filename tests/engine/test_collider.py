@@ -350,3 +350,30 @@ def test_heightfield_ray_cast_kernel_matches_numpy_bit_for_bit():
                             collider._ray_cast_numpy(origins, dirs, transform, max_t)):
                 _same_bits(a, b)
     assert hits > 300  # the cases do hit (415 with this seed)
+
+
+@pytest.mark.parametrize("rotated", [False, True])
+@pytest.mark.parametrize("shape", ["box", "sphere", "plane", "heightfield"])
+def test_rays_that_start_inside_hit_at_zero_with_the_query_normal(shape, rotated):
+    """Inside starts (mixed with outside ones) hit at t = 0 with the normal ``query`` gives there; the ray cast
+    computes those normals only for the inside rows, and skips the rotations of an unrotated collider."""
+    from engine.heightfield import midpoint_displacement
+
+    field = HeightField(heights=midpoint_displacement(4, 0.6, 2.0, np.random.default_rng(5)), spacing=0.5,
+                        origin=[-4.0, -4.0])
+    collider = Collider(shape=shape, heightfield=field if shape == "heightfield" else None, radius=1.5,
+                        half_extents=np.array([1.0, 0.7, 1.2]))
+    transform = Transform(position=[0.2, -0.1, 0.3],
+                          rotation=quat_from_euler(0.3, 0.2, -0.1) if rotated else np.array([1.0, 0.0, 0.0, 0.0]))
+    rng = np.random.default_rng(2)
+    origins = rng.uniform(-1.6, 1.6, (400, 3))
+    dirs = rng.normal(size=(400, 3))
+    inside = collider.signed_distance(origins, transform) < 0.0
+    assert 40 < inside.sum() < 360  # a mix of inside and outside starts
+    hit, t, normal = collider.ray_cast(origins, dirs, transform, max_t=0.5)
+    assert hit[inside].all() and (t[inside] == 0.0).all()
+    np.testing.assert_array_equal(normal[inside], collider.query(origins[inside], transform)[1])
+    np.testing.assert_array_equal(normal[~hit], 0.0)
+    assert np.isinf(t[~hit]).all()
+    for a, b in zip((hit, t, normal), collider._ray_cast_numpy(origins, dirs, transform, max_t=0.5)):
+        np.testing.assert_array_equal(a, b)

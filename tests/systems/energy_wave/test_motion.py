@@ -427,3 +427,16 @@ def test_kernel_repulsion_is_the_pair_by_pair_sum_bit_for_bit(limit):
     got = neighbour_repulsion(query, pts, 0.1, 4.0, per_bucket_limit=limit)
     assert np.abs(got).max() > 0.0
     assert np.array_equal(got, _sampled_reference(query, pts, 0.1, limit if limit else 1 << 62, 4.0))
+
+
+def test_a_target_that_moves_is_hit_where_it_is_now():
+    """The sweep's collider bounds are cached while a collider stays put: moving the target (in place, as a
+    script does) must move the hits with it."""
+    app = make_app(5)
+    box = add_box(app, (0.0, 0.0, -2.0), (1.0, 1.0, 0.1))
+    entity, _, st = add_emitter(app, beam_radius=0.1, emission_rate=2000.0, beam_speed=10.0)
+    first = [h for tick in _events(app, EnergyWaveHit, 20) for h in tick]
+    assert first and all(abs(h.point[2] + 1.9) < 1e-6 for h in first)
+    app.world.get(box, Transform).position[2] = -4.0  # in place: the same array object
+    later = [h for tick in _events(app, EnergyWaveHit, 60)[30:] for h in tick]
+    assert later and all(abs(h.point[2] + 3.9) < 1e-6 for h in later)
