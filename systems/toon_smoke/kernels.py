@@ -253,6 +253,45 @@ def advect_scalars_kernel(a, b, u, v, w, s):  # pragma: no cover
     return out_a, out_b
 
 
+@kernel(inline="always")
+def _mac_at(u, v, w, half, h, px, py, pz, out, row):  # pragma: no cover
+    """Velocity at one local point (metres), each component trilinear on its staggered grid, into ``out[row]``:
+    ``grid.MacSampler.sample`` at ``geo.to_cells(point)`` (float64 coordinates and fractions, float32 values)."""
+    cx = (px + half[0]) / h
+    cy = (py + half[1]) / h
+    cz = (pz + half[2]) / h
+    out[row, 0] = _trilinear(u, cx, cy - 0.5, cz - 0.5)
+    out[row, 1] = _trilinear(v, cx - 0.5, cy, cz - 0.5)
+    out[row, 2] = _trilinear(w, cx - 0.5, cy - 0.5, cz)
+
+
+@kernel
+def mac_velocity_kernel(points, u, v, w, half, h):  # pragma: no cover
+    """Fluid velocity (N, 3) float64 at local points (N, 3) (``simulate.particle_velocity``); ``half`` is half
+    the box's extent, ``h`` the cell size."""
+    out = np.empty((points.shape[0], 3))
+    for n in range(points.shape[0]):
+        _mac_at(u, v, w, half, h, points[n, 0], points[n, 1], points[n, 2], out, n)
+    return out
+
+
+@kernel
+def advect_particles_kernel(p, u, v, w, half, h, half_dt, dt):  # pragma: no cover
+    """The midpoint rule of ``simulate.advect_particles``: mid = p + (½Δt)·u(p), then p + Δt·u(mid).  Returns
+    (new positions, the midpoint velocities), the same operations per particle as the numpy reference."""
+    n = p.shape[0]
+    first = np.empty((1, 3))
+    velocity = np.empty((n, 3))
+    moved = np.empty((n, 3))
+    for r in range(n):
+        _mac_at(u, v, w, half, h, p[r, 0], p[r, 1], p[r, 2], first, 0)
+        _mac_at(u, v, w, half, h, p[r, 0] + half_dt * first[0, 0], p[r, 1] + half_dt * first[0, 1],
+                p[r, 2] + half_dt * first[0, 2], velocity, r)
+        for a in range(3):
+            moved[r, a] = p[r, a] + dt * velocity[r, a]
+    return moved, velocity
+
+
 # --- Multigrid smoother and residual of the pressure solve (McAdams et al. 2010; seeds/002 §3.1) -----------------
 #
 # The numpy reference (:func:`systems.toon_smoke.poisson._half_sweep_numpy`, ``_residual_numpy``) works on the
