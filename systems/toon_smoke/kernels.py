@@ -336,6 +336,50 @@ def half_sweep_kernel(x, b, keep, scale, sx, sy, coefficients, weighted, start, 
 
 
 @kernel
+def pre_smooth_kernel(x, b, red_scale, black_scale, keep_red, keep_black, sx, sy, coefficients, weighted, start,
+                      s, sweeps):  # pragma: no cover
+    """A V-cycle's pre-smoothing on one level from φ = 0 (``poisson._v_cycle``), in one call: the first red half
+    sweep (φ = red_scale·b, no neighbours to sum), then black, then ``sweeps`` − 1 more (red, black) pairs."""
+    n = s.shape[0]
+    xs = x[start:start + n]
+    for t in range(n):
+        xs[t] = red_scale[t] * b[t]
+    half_sweep_kernel(x, b, keep_black, black_scale, sx, sy, coefficients, weighted, start, s)
+    for _ in range(sweeps - 1):
+        half_sweep_kernel(x, b, keep_red, red_scale, sx, sy, coefficients, weighted, start, s)
+        half_sweep_kernel(x, b, keep_black, black_scale, sx, sy, coefficients, weighted, start, s)
+
+
+@kernel
+def post_smooth_kernel(x, b, red_scale, black_scale, keep_red, keep_black, sx, sy, coefficients, weighted, start,
+                       s, sweeps, coarse_x, parent_index, inactive):  # pragma: no cover
+    """A V-cycle's coarse correction and post-smoothing on one level (``poisson._v_cycle``), in one call: each
+    cell adds its parent's coarse value (0 on inactive cells), then ``sweeps`` (black, red) pairs."""
+    n = s.shape[0]
+    xs = x[start:start + n]
+    for t in range(n):
+        xs[t] = np.float32(0.0) if inactive[t] else xs[t] + coarse_x[parent_index[t]]
+    for _ in range(sweeps):
+        half_sweep_kernel(x, b, keep_black, black_scale, sx, sy, coefficients, weighted, start, s)
+        half_sweep_kernel(x, b, keep_red, red_scale, sx, sy, coefficients, weighted, start, s)
+
+
+@kernel
+def restrict_kernel(r, out):  # pragma: no cover
+    """Coarse right-hand side ``out`` (nx/2, ny/2, nz/2) from the fine residual ``r`` (nx, ny, nz): the children
+    summed in x pairs, then y pairs, then z pairs, times ½ (``poisson._restrict_numpy``, the same order)."""
+    n0, n1, n2 = out.shape
+    for i in range(n0):
+        for j in range(n1):
+            for k in range(n2):
+                a0 = (r[2 * i, 2 * j, 2 * k] + r[2 * i + 1, 2 * j, 2 * k]) + (
+                    r[2 * i, 2 * j + 1, 2 * k] + r[2 * i + 1, 2 * j + 1, 2 * k])
+                a1 = (r[2 * i, 2 * j, 2 * k + 1] + r[2 * i + 1, 2 * j, 2 * k + 1]) + (
+                    r[2 * i, 2 * j + 1, 2 * k + 1] + r[2 * i + 1, 2 * j + 1, 2 * k + 1])
+                out[i, j, k] = (a0 + a1) * np.float32(0.5)
+
+
+@kernel
 def residual_kernel(x, b, diag, inactive, sx, sy, coefficients, weighted, start, r):  # pragma: no cover
     """r = b − M φ over the span, 0 on inactive cells, (M φ)_c = diag_c·φ_c − Σ A φ_nb (the poisson module)."""
     n = r.shape[0]

@@ -298,13 +298,48 @@ def apply_operator(level: Level, phi: F32) -> F32:
     return flat.r_interior.copy()
 
 
-def _half_sweep(flat: _FlatLevel, keep: F32, scale: F32) -> None:
-    """One colour of red–black Gauss–Seidel, in place on ``flat.x``, compiled
-    (:func:`systems.toon_smoke.kernels.half_sweep_kernel`): the same bits as :func:`_half_sweep_numpy`."""
-    from systems.toon_smoke.kernels import half_sweep_kernel
+def _smoother_args(flat: _FlatLevel) -> tuple:
+    return (flat.x, flat.b_span, flat.red_inv_diag, flat.black_inv_diag, flat.keep_red, flat.keep_black,
+            flat.offsets[1], flat.offsets[3], flat.coefficient_matrix, flat.coefficients is not None, flat.span.start,
+            flat.s, _SMOOTH_SWEEPS)
 
-    half_sweep_kernel(flat.x, flat.b_span, keep, scale, flat.offsets[1], flat.offsets[3],
-                      flat.coefficient_matrix, flat.coefficients is not None, flat.span.start, flat.s)
+
+def _pre_smooth(flat: _FlatLevel) -> None:
+    """Pre-smoothing from φ = 0, in place on ``flat.x``: the first red half sweep (no neighbours to sum), black,
+    then _SMOOTH_SWEEPS − 1 more (red, black) pairs; one compiled call
+    (:func:`systems.toon_smoke.kernels.pre_smooth_kernel`), the same bits as :func:`_pre_smooth_numpy`."""
+    from systems.toon_smoke.kernels import pre_smooth_kernel
+
+    pre_smooth_kernel(*_smoother_args(flat))
+
+
+def _post_smooth(flat: _FlatLevel, coarse: _FlatLevel) -> None:
+    """Piecewise-constant prolongation (each coarse value added to its 8 children, the adjoint of the restriction;
+    0 on inactive cells), then _SMOOTH_SWEEPS (black, red) pairs; one compiled call
+    (:func:`systems.toon_smoke.kernels.post_smooth_kernel`), the same bits as :func:`_post_smooth_numpy`."""
+    from systems.toon_smoke.kernels import post_smooth_kernel
+
+    post_smooth_kernel(*_smoother_args(flat), coarse.x, flat.parent_index, flat.inactive)
+
+
+def _pre_smooth_numpy(flat: _FlatLevel) -> None:
+    """:func:`_pre_smooth` in numpy (its reference)."""
+    np.multiply(flat.red_inv_diag, flat.b_span, out=flat.x_span)
+    _half_sweep_numpy(flat, flat.keep_black, flat.black_inv_diag)
+    for _ in range(_SMOOTH_SWEEPS - 1):
+        _half_sweep_numpy(flat, flat.keep_red, flat.red_inv_diag)
+        _half_sweep_numpy(flat, flat.keep_black, flat.black_inv_diag)
+
+
+def _post_smooth_numpy(flat: _FlatLevel, coarse: _FlatLevel) -> None:
+    """:func:`_post_smooth` in numpy (its reference): one gather of each cell's parent (0 for ghosts), one
+    contiguous addition over the span."""
+    x = flat.x_span
+    x += coarse.x.take(flat.parent_index)
+    np.copyto(x, np.float32(0.0), where=flat.inactive)
+    for _ in range(_SMOOTH_SWEEPS):
+        _half_sweep_numpy(flat, flat.keep_black, flat.black_inv_diag)
+        _half_sweep_numpy(flat, flat.keep_red, flat.red_inv_diag)
 
 
 def _residual(flat: _FlatLevel) -> F32:
@@ -340,7 +375,15 @@ def _half_sweep_numpy(flat: _FlatLevel, keep: F32, scale: F32) -> None:
 
 def _restrict_into(fine: _FlatLevel, coarse: _FlatLevel) -> None:
     """Coarse right-hand side from the fine residual ``fine.r``: 4 × the mean of the 8 children (the (2h)²/h²
-    scaling of the 7-point Laplacian), written into the coarse level's ``b``."""
+    scaling of the 7-point Laplacian), written into the coarse level's ``b``; compiled
+    (:func:`systems.toon_smoke.kernels.restrict_kernel`), the same bits as :func:`_restrict_numpy`."""
+    from systems.toon_smoke.kernels import restrict_kernel
+
+    restrict_kernel(fine.r_interior, coarse.b_interior)
+
+
+def _restrict_numpy(fine: _FlatLevel, coarse: _FlatLevel) -> None:
+    """:func:`_restrict_into` in numpy (its reference)."""
     r = fine.r_interior
     s = r[0::2] + r[1::2]
     s = s[:, 0::2] + s[:, 1::2]
@@ -359,23 +402,12 @@ def _v_cycle(levels: list[Level], depth: int) -> None:
         flat.x[cells] = (level.dense_inverse * flat.b[cells].astype(np.float64)[None, :]).sum(axis=1).astype(
             np.float32)
         return
-    x = flat.x_span
-    np.multiply(flat.red_inv_diag, flat.b_span, out=x)  # the first red half sweep from φ = 0 needs no neighbours
-    _half_sweep(flat, flat.keep_black, flat.black_inv_diag)
-    for _ in range(_SMOOTH_SWEEPS - 1):
-        _half_sweep(flat, flat.keep_red, flat.red_inv_diag)
-        _half_sweep(flat, flat.keep_black, flat.black_inv_diag)
+    _pre_smooth(flat)
     _residual(flat)  # b − M x on active cells, 0 elsewhere
     coarse = levels[depth + 1].flat
     _restrict_into(flat, coarse)
     _v_cycle(levels, depth + 1)
-    # piecewise-constant prolongation: each coarse value added to its 8 children (adjoint of the restriction), as
-    # one gather of each cell's parent (0 for ghosts) and one contiguous addition over the span
-    x += coarse.x.take(flat.parent_index)
-    np.copyto(x, np.float32(0.0), where=flat.inactive)
-    for _ in range(_SMOOTH_SWEEPS):
-        _half_sweep(flat, flat.keep_black, flat.black_inv_diag)
-        _half_sweep(flat, flat.keep_red, flat.red_inv_diag)
+    _post_smooth(flat, coarse)
 
 
 def v_cycle(hierarchy: PoissonHierarchy, b: F32) -> F32:

@@ -182,7 +182,7 @@ def test_advection_kernels_match_the_numpy_reference_bit_for_bit(shape, scale):
 
 @pytest.mark.parametrize("open_sides", [(False, False, False, True, False, False), (False,) * 6])
 def test_compiled_smoother_matches_the_numpy_reference_bit_for_bit(monkeypatch, open_sides):
-    """The compiled red–black half sweep and residual give the numpy reference's bits through a whole MGPCG solve,
+    """The compiled red–black smoothing (pre, and prolongation + post), residual and restriction give the numpy reference's bits through a whole MGPCG solve,
     with a sphere obstacle (coarse levels with fractional face coefficients: the weighted stencil) and without."""
     for radius in (5.0, 0.0):
         hierarchy = poisson.build_hierarchy(_sphere_solid(N, radius), open_sides)
@@ -192,7 +192,9 @@ def test_compiled_smoother_matches_the_numpy_reference_bit_for_bit(monkeypatch, 
         b = -fluid.divergence(u, v, w, 0.1) * np.float32(0.1)
         compiled = poisson.solve(hierarchy, b, None, 1e-6, 12)
         with monkeypatch.context() as patch:
-            patch.setattr(poisson, "_half_sweep", poisson._half_sweep_numpy)
+            patch.setattr(poisson, "_pre_smooth", poisson._pre_smooth_numpy)
+            patch.setattr(poisson, "_post_smooth", poisson._post_smooth_numpy)
+            patch.setattr(poisson, "_restrict_into", poisson._restrict_numpy)
             patch.setattr(poisson, "_residual", poisson._residual_numpy)
             reference = poisson.solve(hierarchy, b, None, 1e-6, 12)
         assert compiled[1].iterations == reference[1].iterations > 1
