@@ -25,6 +25,8 @@ __all__ = [
     "advect_scalars_numpy",
     "advect_velocity",
     "advect_velocity_numpy",
+    "body_forces",
+    "body_forces_numpy",
     "cell_velocity",
     "diffuse",
     "divergence",
@@ -249,6 +251,30 @@ def _length(x: F32, y: F32, z: F32, out: F32) -> F32:
     out += y * y
     out += z * z
     return np.sqrt(out, out=out)
+
+
+def body_forces(u: F32, v: F32, w: F32, temperature: F32, density: F32, buoyancy: float, weight: float,
+                up: NDArray[np.float64], confinement: float, h: float, dt: float) -> None:
+    """Buoyancy (β·T − α·ρ along ``up``) and vorticity confinement (ε), added to the face velocities over Δt, in
+    place; one compiled pass (:func:`systems.toon_smoke.kernels.body_forces_kernel`), the same bits as
+    :func:`body_forces_numpy`, its reference in the tests."""
+    from systems.toon_smoke.kernels import body_forces_kernel
+
+    use_up = np.array([abs(up[a]) > 1e-12 for a in range(3)])
+    body_forces_kernel(u, v, w, _f32c(temperature), _f32c(density), np.float32(buoyancy), np.float32(weight),
+                       np.asarray(up, np.float64).astype(np.float32), use_up, confinement > 0.0,
+                       np.float32(confinement * h), np.float32(1.0 / h), np.float32(dt))
+
+
+def body_forces_numpy(u: F32, v: F32, w: F32, temperature: F32, density: F32, buoyancy: float, weight: float,
+                      up: NDArray[np.float64], confinement: float, h: float, dt: float) -> None:
+    """:func:`body_forces` in numpy: the cell forces (:func:`vorticity_force`), then :func:`add_cell_force`."""
+    lift = np.float32(buoyancy) * temperature - np.float32(weight) * density
+    force = [lift * np.float32(up[a]) if abs(up[a]) > 1e-12 else None for a in range(3)]
+    if confinement > 0.0:
+        vort = vorticity_force(u, v, w, h, confinement)
+        force = [vort[a] if force[a] is None else force[a] + vort[a] for a in range(3)]
+    add_cell_force(u, v, w, tuple(force), dt)
 
 
 def add_cell_force(u: F32, v: F32, w: F32, force: tuple[F32 | None, F32 | None, F32 | None], dt: float) -> None:

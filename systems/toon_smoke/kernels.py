@@ -292,6 +292,118 @@ def advect_particles_kernel(p, u, v, w, half, h, half_dt, dt):  # pragma: no cov
     return moved, velocity
 
 
+@kernel(inline="always")
+def _central(f, i, j, k, axis, inv_h):  # pragma: no cover
+    """∂f/∂axis at cell (i, j, k): central difference, one-sided at the walls (``fluid.vorticity_force``'s d)."""
+    n = f.shape[axis]
+    c = i if axis == 0 else (j if axis == 1 else k)
+    if n < 2:
+        return np.float32(0.0) * inv_h
+    if c == 0:
+        lo, hi = 0, 1
+    elif c == n - 1:
+        lo, hi = n - 2, n - 1
+    else:
+        lo, hi = c - 1, c + 1
+    if axis == 0:
+        diff = f[hi, j, k] - f[lo, j, k]
+    elif axis == 1:
+        diff = f[i, hi, k] - f[i, lo, k]
+    else:
+        diff = f[i, j, hi] - f[i, j, lo]
+    if c != 0 and c != n - 1:
+        diff = diff * np.float32(0.5)
+    return diff * inv_h
+
+
+@kernel
+def body_forces_kernel(u, v, w, temperature, density, buoyancy, weight, up, use_up, confine, eps_h, inv_h,
+                       dt):  # pragma: no cover
+    """u += Δt·f on the faces (in place) with f = (β·T − α·ρ)·up + ε h (N × ω) at the cells (buoyancy and
+    vorticity confinement, ``fluid.body_forces_numpy``), averaged onto the faces; float32 throughout, the numpy
+    code's operations in its order.  ``use_up[a]``: whether up has a component along a; ``confine``: ε > 0."""
+    nx, ny, nz = temperature.shape
+    half = np.float32(0.5)
+    fx = np.zeros((nx, ny, nz), np.float32)
+    fy = np.zeros((nx, ny, nz), np.float32)
+    fz = np.zeros((nx, ny, nz), np.float32)
+    has = (use_up[0] or confine, use_up[1] or confine, use_up[2] or confine)
+    if confine:
+        uc = np.empty((nx, ny, nz), np.float32)
+        vc = np.empty((nx, ny, nz), np.float32)
+        wc = np.empty((nx, ny, nz), np.float32)
+        for i in range(nx):
+            for j in range(ny):
+                for k in range(nz):
+                    uc[i, j, k] = half * (u[i, j, k] + u[i + 1, j, k])
+                    vc[i, j, k] = half * (v[i, j, k] + v[i, j + 1, k])
+                    wc[i, j, k] = half * (w[i, j, k] + w[i, j, k + 1])
+        ox = np.empty((nx, ny, nz), np.float32)
+        oy = np.empty((nx, ny, nz), np.float32)
+        oz = np.empty((nx, ny, nz), np.float32)
+        mag = np.empty((nx, ny, nz), np.float32)
+        for i in range(nx):
+            for j in range(ny):
+                for k in range(nz):
+                    a = _central(wc, i, j, k, 1, inv_h) - _central(vc, i, j, k, 2, inv_h)
+                    b = _central(uc, i, j, k, 2, inv_h) - _central(wc, i, j, k, 0, inv_h)
+                    c = _central(vc, i, j, k, 0, inv_h) - _central(uc, i, j, k, 1, inv_h)
+                    ox[i, j, k], oy[i, j, k], oz[i, j, k] = a, b, c
+                    mag[i, j, k] = np.sqrt((a * a + b * b) + c * c)
+        tiny = np.float32(1e-6)
+        for i in range(nx):
+            for j in range(ny):
+                for k in range(nz):
+                    gx = _central(mag, i, j, k, 0, inv_h)
+                    gy = _central(mag, i, j, k, 1, inv_h)
+                    gz = _central(mag, i, j, k, 2, inv_h)
+                    scale = eps_h / (np.sqrt((gx * gx + gy * gy) + gz * gz) + tiny)
+                    gx, gy, gz = gx * scale, gy * scale, gz * scale
+                    a, b, c = ox[i, j, k], oy[i, j, k], oz[i, j, k]
+                    fx[i, j, k] = gy * c - gz * b
+                    fy[i, j, k] = gz * a - gx * c
+                    fz[i, j, k] = gx * b - gy * a
+    for i in range(nx):
+        for j in range(ny):
+            for k in range(nz):
+                lift = buoyancy * temperature[i, j, k] - weight * density[i, j, k]
+                if use_up[0]:
+                    fx[i, j, k] = lift * up[0] + fx[i, j, k] if confine else lift * up[0]
+                if use_up[1]:
+                    fy[i, j, k] = lift * up[1] + fy[i, j, k] if confine else lift * up[1]
+                if use_up[2]:
+                    fz[i, j, k] = lift * up[2] + fz[i, j, k] if confine else lift * up[2]
+    if has[0]:
+        _add_face_force(u, fx, 0, dt)
+    if has[1]:
+        _add_face_force(v, fy, 1, dt)
+    if has[2]:
+        _add_face_force(w, fz, 2, dt)
+
+
+@kernel(inline="always")
+def _add_face_force(comp, f, axis, dt):  # pragma: no cover
+    """comp += Δt·(f on the faces normal to ``axis``): the mean of the two cells, a border face its cell
+    (``fluid._to_faces``)."""
+    n0, n1, n2 = comp.shape
+    n = f.shape[axis]
+    for i in range(n0):
+        for j in range(n1):
+            for k in range(n2):
+                c = i if axis == 0 else (j if axis == 1 else k)
+                if c == 0:
+                    face = f[i, j, k]
+                elif c == n:
+                    face = f[i - 1, j, k] if axis == 0 else (f[i, j - 1, k] if axis == 1 else f[i, j, k - 1])
+                elif axis == 0:
+                    face = (f[i - 1, j, k] + f[i, j, k]) * np.float32(0.5)
+                elif axis == 1:
+                    face = (f[i, j - 1, k] + f[i, j, k]) * np.float32(0.5)
+                else:
+                    face = (f[i, j, k - 1] + f[i, j, k]) * np.float32(0.5)
+                comp[i, j, k] += dt * face
+
+
 # --- Multigrid smoother and residual of the pressure solve (McAdams et al. 2010; seeds/002 §3.1) -----------------
 #
 # The numpy reference (:func:`systems.toon_smoke.poisson._half_sweep_numpy`, ``_residual_numpy``) works on the

@@ -172,12 +172,8 @@ def velocity_step(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, dt: float, 
     h = geo.h
     u, v, w = fluid.advect_velocity(geo, state.u, state.v, state.w, dt)
     state.u, state.v, state.w = u, v, w
-    lift = np.float32(cfg.buoyancy) * state.temperature - np.float32(cfg.smoke_weight) * state.density
-    force = [lift * np.float32(up_local[a]) if abs(up_local[a]) > 1e-12 else None for a in range(3)]
-    if cfg.vorticity_confinement > 0.0:
-        vort = fluid.vorticity_force(u, v, w, h, cfg.vorticity_confinement)
-        force = [vort[a] if force[a] is None else force[a] + vort[a] for a in range(3)]
-    fluid.add_cell_force(u, v, w, tuple(force), dt)
+    fluid.body_forces(u, v, w, state.temperature, state.density, cfg.buoyancy, cfg.smoke_weight, up_local,
+                      cfg.vorticity_confinement, h, dt)
     apply_sources(cfg, state, dt, rng)
     if cfg.viscosity > 0.0:
         state.u, state.v, state.w = (fluid.diffuse(c, cfg.viscosity, dt, h, cfg.diffusion_iterations)
