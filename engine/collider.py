@@ -16,7 +16,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from engine.heightfield import HeightField
 from engine.jit import kernel
-from engine.spatial import Transform, quat_conjugate, quat_rotate
+from engine.spatial import Transform, quat_conjugate, quat_is_identity, quat_rotate
 
 __all__ = ["Collider", "ColliderShape", "RayHits"]
 
@@ -44,11 +44,6 @@ def _first_max(a: F64, b: F64, c: F64) -> NDArray[np.int64]:
     axis = (b > a).astype(np.int64)
     axis[c > np.maximum(a, b)] = 2
     return axis
-
-
-def _is_identity(q: F64) -> bool:
-    """Whether the quaternion is exactly (1, 0, 0, 0)."""
-    return bool(q[0] == 1.0 and q[1] == 0.0 and q[2] == 0.0 and q[3] == 0.0)
 
 
 def _unit(v: F64, fallback: F64) -> F64:
@@ -143,7 +138,7 @@ class Collider:
         An unrotated collider skips the rotations (a rotation by the identity returns its input, up to the sign of
         zeros), and the inside test's normals are computed only for the rays that start inside (usually none):
         for a height field they cost four more surface lookups per ray."""
-        rotated = not _is_identity(transform.rotation)
+        rotated = not quat_is_identity(transform.rotation)
         o = origins - transform.position
         d = dirs
         if rotated:

@@ -18,6 +18,7 @@ __all__ = [
     "quat_from_axis_angle",
     "quat_from_euler",
     "quat_identity",
+    "quat_is_identity",
     "quat_mul",
     "quat_normalize",
     "quat_rotate",
@@ -30,6 +31,11 @@ F64 = NDArray[np.float64]
 def quat_identity() -> F64:
     """The identity rotation (1, 0, 0, 0)."""
     return np.array([1.0, 0.0, 0.0, 0.0])
+
+
+def quat_is_identity(q: ArrayLike) -> bool:
+    """Whether q is exactly (1, 0, 0, 0): a rotation that returns its input (callers skip rotating then)."""
+    return bool(q[0] == 1.0 and q[1] == 0.0 and q[2] == 0.0 and q[3] == 0.0)
 
 
 def quat_normalize(q: ArrayLike) -> F64:

@@ -18,7 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from components.dust_devil import DustDevilConfig, DustDevilState
 from engine.heightfield import HeightField
-from engine.spatial import Transform, quat_conjugate, quat_rotate
+from engine.spatial import Transform, quat_conjugate, quat_is_identity, quat_rotate
 from systems.dust_devil.tornado import WindField, centre_line, to_unit
 
 __all__ = ["Ground", "project_onto_slope", "slope_wind", "step", "rotate_centre_line", "centre_at", "emit", "drag",
@@ -28,14 +28,10 @@ F64 = NDArray[np.float64]
 _UP = np.array([0.0, 1.0, 0.0])
 
 
-def _is_identity(q: F64) -> bool:
-    return bool(q[0] == 1.0 and not q[1:].any())
-
-
 def to_world(transform: Transform, p: F64, direction: bool = False) -> F64:
     """``Transform.to_world`` (for a ``direction``: R·(scale·v)) with fast paths for no rotation / unit scale."""
     out = p if np.all(transform.scale == 1.0) else p * transform.scale
-    if not _is_identity(transform.rotation):
+    if not quat_is_identity(transform.rotation):
         out = quat_rotate(transform.rotation, out)
     if direction:
         return out.copy() if out is p else out
@@ -45,7 +41,7 @@ def to_world(transform: Transform, p: F64, direction: bool = False) -> F64:
 def to_local(transform: Transform, p: F64) -> F64:
     """``Transform.to_local`` with fast paths for no rotation / unit scale."""
     p = p - transform.position
-    if not _is_identity(transform.rotation):
+    if not quat_is_identity(transform.rotation):
         p = quat_rotate(quat_conjugate(transform.rotation), p)
     if not np.all(transform.scale == 1.0):
         p = p / transform.scale
@@ -65,11 +61,11 @@ class Ground:
         if t is None:
             return points
         local = points - t.position
-        return local if _is_identity(t.rotation) else quat_rotate(quat_conjugate(t.rotation), local)
+        return local if quat_is_identity(t.rotation) else quat_rotate(quat_conjugate(t.rotation), local)
 
     def _world_dir(self, v: F64) -> F64:
         t = self.transform
-        return v if t is None or _is_identity(t.rotation) else quat_rotate(t.rotation, v)
+        return v if t is None or quat_is_identity(t.rotation) else quat_rotate(t.rotation, v)
 
     def depth(self, points: F64) -> F64:
         """How far (N,) each world point lies below the surface along the terrain's up (negative above)."""
@@ -272,9 +268,9 @@ USE_KERNELS = True  # the compiled particle step (kernels.py) where it applies; 
 
 def _kernel_case(transform: Transform, ground: Ground | None) -> bool:
     """Whether the compiled step applies: the box is not rotated or scaled, the terrain (if any) not rotated."""
-    if not (_is_identity(transform.rotation) and np.all(transform.scale == 1.0)):
+    if not (quat_is_identity(transform.rotation) and np.all(transform.scale == 1.0)):
         return False
-    return ground is None or ground.transform is None or _is_identity(ground.transform.rotation)
+    return ground is None or ground.transform is None or quat_is_identity(ground.transform.rotation)
 
 
 def _advance_kernel(cfg: DustDevilConfig, state: DustDevilState, transform: Transform, ground: Ground | None,

@@ -39,7 +39,7 @@ from components.energy_wave import (BEAM, FRAME, PATTERNS, ROUND_THRESHOLD, Ener
 from engine.collider import Collider
 from engine.impacts import Impact
 from engine.noise import PerlinNoise
-from engine.spatial import Transform, quat_rotate, quat_to_matrix
+from engine.spatial import Transform, quat_is_identity, quat_rotate, quat_to_matrix
 from engine.world import World
 
 from .kernels import advance_particles, dead_moves, gather_in_box, move_rows
@@ -90,17 +90,11 @@ def collider_bounds(collider: Collider, transform: Transform) -> tuple[F64 | Non
     if collider.shape == "sphere":
         r = collider.radius * float(np.max(np.abs(transform.scale)))
         return transform.position - r, transform.position + r
-    if collider.shape == "heightfield" and _near_identity(transform.rotation):
+    if collider.shape == "heightfield" and quat_is_identity(transform.rotation):
         # Solid below the surface; outside its footprint the field is extruded, so only the top is bounded.
         top = collider.heightfield.height_range[1] + transform.position[1]
         return np.full(3, -np.inf), np.array([np.inf, top, np.inf])
     return None, None
-
-
-def _near_identity(q: F64) -> bool:
-    """``np.allclose(q, (1, 0, 0, 0))`` (|a − b| <= 1e-8 + 1e-5·|b| per entry) on four floats, without its cost."""
-    w, x, y, z = (float(c) for c in q)
-    return abs(w - 1.0) <= 1e-8 + 1e-5 and abs(x) <= 1e-8 and abs(y) <= 1e-8 and abs(z) <= 1e-8
 
 
 class ColliderBoundsCache:

@@ -203,8 +203,9 @@ def surface_cells(volume: F32, iso: float) -> NDArray[np.bool_]:
 
     The other cells make no triangles, and skipping them leaves the mesh exactly as it was (the same vertices,
     normals and triangles in the same order; tested).  On the demo's puff 60 steps in, about 2 000 of 39 000
-    cells, and marching cubes 1.9 → 0.7 ms; over a puff's life, about a quarter less.  Each cell is marked at its low corner and at its high corner: scikit-image
-    reads a cell's mask entry at one of the two, and marking both keeps the mesh whole whichever it is."""
+    cells, and marching cubes 1.9 → 0.7 ms; over a puff's life, about a quarter less.  Each cell is marked at
+    its low corner and at its high corner: scikit-image reads a cell's mask entry at one of the two, and marking
+    both keeps the mesh whole whichever it is."""
     above, below = volume >= iso, volume <= iso
     lo, hi = slice(None, -1), slice(1, None)
     corners = [(a, b, c) for a in (lo, hi) for b in (lo, hi) for c in (lo, hi)]

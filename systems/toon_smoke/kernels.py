@@ -267,8 +267,8 @@ def _mac_at(u, v, w, half, h, px, py, pz, out, row):  # pragma: no cover
 
 @kernel
 def mac_velocity_kernel(points, u, v, w, half, h):  # pragma: no cover
-    """Fluid velocity (N, 3) float64 at local points (N, 3) (``simulate.particle_velocity``); ``half`` is half
-    the box's extent, ``h`` the cell size."""
+    """Fluid velocity (N, 3) float64 at local points (N, 3), as ``grid.MacSampler.sample`` at
+    ``geo.to_cells(points)``; ``half`` is half the box's extent, ``h`` the cell size."""
     out = np.empty((points.shape[0], 3))
     for n in range(points.shape[0]):
         _mac_at(u, v, w, half, h, points[n, 0], points[n, 1], points[n, 2], out, n)
@@ -295,10 +295,8 @@ def advect_particles_kernel(p, u, v, w, half, h, half_dt, dt):  # pragma: no cov
 @kernel(inline="always")
 def _central(f, i, j, k, axis, inv_h):  # pragma: no cover
     """∂f/∂axis at cell (i, j, k): central difference, one-sided at the walls (``fluid.vorticity_force``'s d)."""
-    n = f.shape[axis]
+    n = f.shape[axis]  # at least 2 (the configs allow 8 cells and up)
     c = i if axis == 0 else (j if axis == 1 else k)
-    if n < 2:
-        return np.float32(0.0) * inv_h
     if c == 0:
         lo, hi = 0, 1
     elif c == n - 1:

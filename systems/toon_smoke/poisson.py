@@ -89,6 +89,7 @@ class _FlatLevel:
     x_interior: F32 = field(init=False)  # the (nx, ny, nz) views of x, b and r (see :meth:`interior`), made once
     b_interior: F32 = field(init=False)
     r_interior: F32 = field(init=False)
+    smoother: tuple = field(init=False)  # the compiled smoothers' level arguments (:func:`_pre_smooth`)
 
     def __post_init__(self) -> None:
         lo, hi = self.span.start, self.span.stop
@@ -97,6 +98,9 @@ class _FlatLevel:
         self.coefficient_matrix = (np.zeros((6, 0), np.float32) if self.coefficients is None
                                    else np.ascontiguousarray(np.stack(self.coefficients), np.float32))
         self.x_interior, self.b_interior, self.r_interior = (self.interior(v) for v in (self.x, self.b, self.r))
+        self.smoother = (self.x, self.b_span, self.red_inv_diag, self.black_inv_diag, self.keep_red, self.keep_black,
+                         self.offsets[1], self.offsets[3], self.coefficient_matrix, self.coefficients is not None,
+                         self.span.start, self.s, _SMOOTH_SWEEPS)
         nx, ny, nz = (n - 2 for n in self.padded_shape)
         self.parent_index = None
         if nx % 2 == 0 and ny % 2 == 0 and nz % 2 == 0:
@@ -298,19 +302,13 @@ def apply_operator(level: Level, phi: F32) -> F32:
     return flat.r_interior.copy()
 
 
-def _smoother_args(flat: _FlatLevel) -> tuple:
-    return (flat.x, flat.b_span, flat.red_inv_diag, flat.black_inv_diag, flat.keep_red, flat.keep_black,
-            flat.offsets[1], flat.offsets[3], flat.coefficient_matrix, flat.coefficients is not None, flat.span.start,
-            flat.s, _SMOOTH_SWEEPS)
-
-
 def _pre_smooth(flat: _FlatLevel) -> None:
     """Pre-smoothing from φ = 0, in place on ``flat.x``: the first red half sweep (no neighbours to sum), black,
     then _SMOOTH_SWEEPS − 1 more (red, black) pairs; one compiled call
     (:func:`systems.toon_smoke.kernels.pre_smooth_kernel`), the same bits as :func:`_pre_smooth_numpy`."""
     from systems.toon_smoke.kernels import pre_smooth_kernel
 
-    pre_smooth_kernel(*_smoother_args(flat))
+    pre_smooth_kernel(*flat.smoother)
 
 
 def _post_smooth(flat: _FlatLevel, coarse: _FlatLevel) -> None:
@@ -319,7 +317,7 @@ def _post_smooth(flat: _FlatLevel, coarse: _FlatLevel) -> None:
     (:func:`systems.toon_smoke.kernels.post_smooth_kernel`), the same bits as :func:`_post_smooth_numpy`."""
     from systems.toon_smoke.kernels import post_smooth_kernel
 
-    post_smooth_kernel(*_smoother_args(flat), coarse.x, flat.parent_index, flat.inactive)
+    post_smooth_kernel(*flat.smoother, coarse.x, flat.parent_index, flat.inactive)
 
 
 def _pre_smooth_numpy(flat: _FlatLevel) -> None:

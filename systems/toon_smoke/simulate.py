@@ -30,7 +30,7 @@ from engine.spatial import Transform, quat_conjugate, quat_rotate
 from engine.world import World
 from systems.toon_smoke import fluid, poisson
 from systems.toon_smoke.display import blob_axes, extract_isosurface, noise_factor, splat_blobs
-from systems.toon_smoke.grid import Geometry, MacSampler, trilinear_points, upsample_linear
+from systems.toon_smoke.grid import Geometry, trilinear_points, upsample_linear
 
 _UP = np.array([0.0, 1.0, 0.0])
 
@@ -237,20 +237,12 @@ def spawn_positions(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, rng: np.r
     return (rng.random((count, 3)) - 0.5) * extent
 
 
-def particle_velocity(geo: Geometry, state: ToonSmokeState, local: np.ndarray,
-                      sampler: MacSampler | None = None) -> np.ndarray:
-    """Fluid velocity (m/s) at local positions, each component from its staggered grid (``sampler``: one built
-    from the state's current u, v, w, to share between the queries of a step)."""
-    sampler = MacSampler(state.u, state.v, state.w) if sampler is None else sampler
-    return np.stack(sampler.sample(geo.to_cells(local).T), axis=-1)
-
-
 def advect_particles(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, dt: float, rng: np.random.Generator
                      ) -> None:
     """Move particles with the flow (midpoint rule); rebirth those that left, entered a solid or grew old.
 
     The midpoint rule runs compiled (:func:`systems.toon_smoke.kernels.advect_particles_kernel`): the same bits as
-    two :func:`particle_velocity` queries, its numpy reference in the tests."""
+    two queries of :class:`systems.toon_smoke.grid.MacSampler`, its numpy reference in the tests."""
     geo = _geometry(cfg, state)
     p = state.particles
     if len(p) == 0:
@@ -263,8 +255,7 @@ def advect_particles(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, dt: floa
     p, velocity = advect_particles_kernel(np.ascontiguousarray(p, np.float64), u, v, w, half_extent, h, 0.5 * dt,
                                           float(dt))
     state.particle_age += dt
-    half = 0.5 * np.asarray(cfg.extent, float)
-    reborn = np.any(np.abs(p) > half, axis=1)
+    reborn = np.any(np.abs(p) > half_extent, axis=1)
     if state.display_solid is not None and state.display_solid.any():
         reborn |= _nearest(state.display_solid, geo.to_cells(p) * geo.factor)
     if cfg.particle_lifetime > 0.0:

@@ -145,3 +145,12 @@ def test_single_euler_angles_take_a_fast_path_with_the_array_paths_bits():
         assert quat_from_euler(float(yaw), float(pitch), float(roll)).tobytes() == array.tobytes()
     stacked = quat_from_euler(np.array([0.1, -0.4]), 0.2, 0.0)  # arrays still broadcast
     assert stacked.shape == (2, 4) and stacked[1].tobytes() == quat_from_euler(-0.4, 0.2, 0.0).tobytes()
+
+
+def test_quat_is_identity_is_exact():
+    from engine.spatial import quat_identity, quat_is_identity
+
+    assert quat_is_identity(quat_identity())
+    assert quat_is_identity(np.array([1.0, -0.0, 0.0, -0.0]))
+    assert not quat_is_identity(quat_from_axis_angle([0.0, 1.0, 0.0], 1e-9))
+    assert not quat_is_identity(np.array([-1.0, 0.0, 0.0, 0.0]))  # the same rotation, but not the identity's bits
