@@ -21,9 +21,10 @@ branch is drawn like the stem (``TE_VOLUM`` thinning).
 Vertices are 8 float32: position (plant-local, base at the origin), colour parameter (0 at the blade's root,
 1 at the tip), normal, kind (0 tube, 1 leaf, 2 line or dot).  Meshes are indexed, and every plant variant of a
 level shares one topology: stems, branches, rings and dots are padded to the largest count of any variant
-with collapsed (zero-area, zero-length or repeated) elements.  So a whole level draws with one instanced,
-indexed call per primitive type: the index buffer is shared and the vertex shader fetches vertex
-``variant * vertex_count + gl_VertexID``.
+with collapsed (zero-area, zero-length or repeated) elements, which keeps the level's structure comparable
+across variants (its primitive counts, the tubes-first order).  For drawing, :func:`compact_mesh` drops the
+padding again (about 30 % of a level's vertices and triangles): each variant keeps its real primitives and is
+one command of a multi-draw indirect call.
 """
 
 from __future__ import annotations
@@ -35,7 +36,8 @@ import numpy as np
 from components.grass_field import GrassFieldConfig, GrassFieldState
 
 __all__ = ["FINE", "LEVELS", "PlantSkeleton", "LevelParts", "LevelMesh", "plant_skeleton", "level_parts",
-           "level_geometry", "build_level_meshes", "cell_primitives", "plant_extent", "dot_spacing"]
+           "level_geometry", "build_level_meshes", "cell_primitives", "plant_extent", "dot_spacing", "DRAW_GROUPS",
+           "CompactMesh", "compact_mesh"]
 
 FINE = 8  # integration steps per base length of the reference curve
 LEVELS = 4  # geometric levels 0..3
@@ -412,6 +414,72 @@ def build_level_meshes(cfg: GrassFieldConfig, state: GrassFieldState) -> list[Le
                                 np.array([_real_lines(v, lines) for v in v64]),
                                 np.array([len(p.dots) for p in parts]), _tube_triangles(dims)))
     return meshes
+
+
+# ----------------------------------------------------------------------------------------- compact form
+DRAW_GROUPS = ("tubes", "leaves", "lines", "points")  # tubes: closed, drawable with back faces culled
+
+
+@dataclass
+class CompactMesh:
+    """One level's variants without the shared topology's padding: each variant keeps only the primitives that
+    can cover a pixel (non-degenerate triangles and lines, its own dots) and the vertices they use.  Drawn with
+    one indirect command per variant (base vertex, first index), so no instance runs the padding's vertices or
+    sets up its collapsed triangles (about 30 % of a padded level)."""
+
+    level: int
+    vertices: np.ndarray  # (n, 8) float32: every variant's vertices, variant v's from vertex_base[v]
+    vertex_base: np.ndarray  # (V,) int
+    index: np.ndarray  # (I,) int32, relative to the variant's base vertex; the groups one after the other
+    first: dict[str, np.ndarray]  # draw group -> (V,) first index of each variant's primitives
+    count: dict[str, np.ndarray]  # draw group -> (V,) index count of each variant
+
+    @property
+    def groups(self) -> list[str]:
+        """The draw groups any variant has primitives in, in draw order."""
+        return [g for g in DRAW_GROUPS if self.count[g].any()]
+
+
+def compact_mesh(mesh: LevelMesh) -> CompactMesh:
+    """``mesh`` without its padding (see :class:`CompactMesh`); every variant draws the same pixels as in the
+    shared topology (a collapsed triangle or line covers none, a repeated dot the pixel of the first)."""
+    variants = len(mesh.vertices)
+    tubes = 3 * mesh.tube_triangles
+    lists = {"tubes": (mesh.triangles[:tubes], 3), "leaves": (mesh.triangles[tubes:], 3),
+             "lines": (mesh.lines, 2), "points": (mesh.points, 1)}
+    first = {g: np.zeros(variants, np.int64) for g in DRAW_GROUPS}
+    count = {g: np.zeros(variants, np.int64) for g in DRAW_GROUPS}
+    kept: dict[str, list[np.ndarray]] = {g: [] for g in DRAW_GROUPS}
+    vertices, bases, base = [], [], 0
+    for v in range(variants):
+        verts = mesh.vertices[v]
+        p = verts[:, :3].astype(np.float64)
+        per_group = {}
+        for g, (index, k) in lists.items():
+            prim = np.asarray(index, dtype=np.int64).reshape(-1, k)
+            if k == 3 and len(prim):
+                keep = np.linalg.norm(np.cross(p[prim[:, 1]] - p[prim[:, 0]], p[prim[:, 2]] - p[prim[:, 0]]),
+                                      axis=1) > 1e-12  # as _real_triangles
+            elif k == 2 and len(prim):
+                keep = np.linalg.norm(p[prim[:, 1]] - p[prim[:, 0]], axis=1) > 1e-12  # as _real_lines
+            else:
+                keep = np.arange(len(prim)) < int(mesh.real_points[v])  # the variant's own dots, then repeats
+            per_group[g] = prim[keep].ravel()
+        used = np.unique(np.concatenate(list(per_group.values()))) if any(len(x) for x in per_group.values()) \
+            else np.zeros(0, np.int64)
+        for g in DRAW_GROUPS:
+            kept[g].append(np.searchsorted(used, per_group[g]))
+        vertices.append(verts[used])
+        bases.append(base)
+        base += len(used)
+    index, at = [], 0
+    for g in DRAW_GROUPS:
+        for v in range(variants):
+            first[g][v], count[g][v] = at, len(kept[g][v])
+            index.append(kept[g][v])
+            at += len(kept[g][v])
+    return CompactMesh(mesh.level, np.concatenate(vertices).astype(np.float32), np.array(bases, np.int64),
+                       np.concatenate(index).astype(np.int32), first, count)
 
 
 def plant_extent(meshes: list[LevelMesh]) -> tuple[float, float]:

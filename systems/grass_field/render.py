@@ -2,11 +2,12 @@
 
 Per field and view, one opaque pass draws the :class:`~systems.grass_field.frame.FramePlan` decided on the CPU:
 
-* levels 0-3: one instanced draw per level and primitive type (triangles; lines at level 2; points at level 3),
-  the closed tubes of levels 0-1 (cylinder, square prism) in a draw of their own with back faces culled.
-  The plant, mesh and plant-list data live in textures; instance ``i`` is the ``i``-th listed plant (the plan
-  lists, per level, the plants of its cells that the frustum can see, nearest cells first; see
-  ``shaders/plant.vert``);
+* levels 0-3: one multi-draw indirect call per level and draw group (tubes, leaves, lines at level 2, dots at
+  level 3), one command per plant variant: the variant's own vertices and primitives, without the padding a
+  shared topology needs (geometry.compact_mesh), and its plants as instances.  The closed tubes of levels 0-1
+  (cylinder, square prism) are drawn with back faces culled.  Each frame the plan's plants (per level, those
+  of its cells that the frustum can see, nearest first) are gathered into per-instance records grouped by
+  variant (see ``shaders/plant.vert``).  Before GL 4.3 each command is a draw of its own;
 * level 4: one instanced draw of all level-4 rectangles; their images come from the LOD cache: each cell
   layout's level-3 grass rendered at 12 views into an RGBA atlas (offscreen framebuffer, transparent
   background) once, before the first frame that needs it, then reused; with ``disk_cache`` the atlas is
@@ -33,6 +34,7 @@ from engine.render.passes import lighting_uniforms, opaque_setup, set_uniforms
 from engine.render.renderer import shader_source
 from engine.spatial import Transform
 from systems.grass_field.frame import FramePlan, band_sector_content, plan_frame
+from systems.grass_field.geometry import DRAW_GROUPS, LEVELS, CompactMesh, compact_mesh
 from systems.grass_field.impostor import (ATLAS_MIP_LEVELS, AtlasLayout, DiskCache, Progress, atlas_layout,
                                           band_side_frame, band_view_proj, bake_view_proj, cache_key,
                                           coverage_mipmaps, impostor_basis, tile_bounds, tile_frame, tile_pixels)
@@ -46,7 +48,11 @@ log = logging.getLogger("grass_field")
 SHADERS = Path(__file__).parent / "shaders"
 TEXTURE_WIDTH = 4096
 IMPOSTOR_FLOATS = 8
-MESH_KINDS = (("triangles", moderngl.TRIANGLES, 3), ("lines", moderngl.LINES, 2), ("points", moderngl.POINTS, 1))
+# draw group (geometry.DRAW_GROUPS) -> (primitive mode, back faces culled): the closed tubes' faces turned away from
+# the eye are hidden by those turned towards it, so half their triangles never reach the rasteriser
+GROUP_DRAWS = {"tubes": (moderngl.TRIANGLES, True), "leaves": (moderngl.TRIANGLES, False),
+               "lines": (moderngl.LINES, False), "points": (moderngl.POINTS, False)}
+COMMAND_WORDS = 5  # an indexed indirect command: count, instance count, first index, base vertex, base instance
 
 
 def _with_defines(source: str, defines: tuple[str, ...]) -> str:
@@ -70,25 +76,19 @@ def _data_texture(ctx: moderngl.Context, texels: np.ndarray, dtype: str = "f4") 
     return tex
 
 
-def plant_texels(position: np.ndarray, yaw: np.ndarray, scale: np.ndarray, variant: np.ndarray,
-                 tint: np.ndarray) -> np.ndarray:
-    """(2N, 4) float32: per plant (x, y, z, scale), (cos yaw, sin yaw, tint, variant) — see
+RECORD_BYTES = 32  # a plant record: the per-instance attributes i_p0, i_p1 of shaders/plant.vert
+
+
+def plant_records(position: np.ndarray, yaw: np.ndarray, scale: np.ndarray, variant: np.ndarray,
+                  tint: np.ndarray) -> np.ndarray:
+    """(N, 8) float32: per plant (x, y, z, scale, cos yaw, sin yaw, tint, variant), the instance attributes of
     ``shaders/plant.vert``.  The rotation's cosine and sine are taken once per plant here (in float64), not per
     vertex in the shader."""
     yaw = np.asarray(yaw, dtype=np.float64)
-    out = np.zeros((len(position), 2, 4), dtype=np.float32)
-    out[:, 0, :3], out[:, 0, 3] = position, scale
-    out[:, 1, 0], out[:, 1, 1], out[:, 1, 2], out[:, 1, 3] = np.cos(yaw), np.sin(yaw), tint, variant
-    return out.reshape(-1, 4)
-
-
-def _mesh_draws(kind: str, mode: int, count: int, tubes: int) -> list[tuple[str, int, int, int, bool]]:
-    """The draws of one index buffer: the closed tubes' ``tubes`` leading indices with back faces culled (half
-    of their triangles never reach the rasteriser), then the rest (two-sided leaves, lines, dots) unculled."""
-    draws = [(kind, mode, 0, tubes, True)] if tubes else []
-    if count > tubes:
-        draws.append((kind, mode, tubes, count - tubes, False))
-    return draws
+    out = np.zeros((len(position), 8), dtype=np.float32)
+    out[:, :3], out[:, 3] = position, scale
+    out[:, 4], out[:, 5], out[:, 6], out[:, 7] = np.cos(yaw), np.sin(yaw), tint, variant
+    return out
 
 
 @dataclass
@@ -129,26 +129,20 @@ class FieldGpu:
         self.band_prog = self._program("band")
         placed = data.placed
         ctx = self.ctx
-        self.plant_tex = _data_texture(ctx, plant_texels(placed.plant_position, placed.plant_yaw,
-                                                         placed.plant_scale, placed.plant_variant, placed.plant_tint))
+        self.plant_records = plant_records(placed.plant_position, placed.plant_yaw, placed.plant_scale,
+                                           placed.plant_variant, placed.plant_tint)
         self.cell_capacity = max(1, placed.cell_count)
-        # the plants drawn this frame, all geometric levels one after the other (rewritten row by row per frame)
-        self.list_tex = _data_texture(ctx, np.zeros((max(1, len(placed.plant_position)), 1), np.int32), dtype="i4")
-        self._list_upload = np.zeros(self.list_tex.width * self.list_tex.height, np.int32)
-        # per level: one vertex texture for all variants, one shared index buffer per primitive type, and the
-        # draws of each level: (kind, mode, first index, index count, cull back faces)
-        self.mesh_tex: dict[int, tuple[moderngl.Texture, int]] = {}
-        self.meshes: dict[tuple[int, str], moderngl.Buffer] = {}
-        self.mesh_draws: dict[int, list[tuple[str, int, int, int, bool]]] = {}
-        for mesh in data.meshes:
-            self.mesh_tex[mesh.level] = (_data_texture(ctx, mesh.vertices.reshape(-1, 4)), mesh.vertices.shape[1])
-            self.mesh_draws[mesh.level] = draws = []
-            for kind, mode, _ in MESH_KINDS:
-                index = getattr(mesh, kind)
-                if len(index):
-                    self.meshes[(mesh.level, kind)] = ctx.buffer(np.ascontiguousarray(index, dtype=np.int32).tobytes())
-                    draws.extend(_mesh_draws(kind, mode, len(index), 3 * mesh.tube_triangles if kind == "triangles"
-                                             else 0))
+        # the records of the plants drawn this frame, all geometric levels one after the other, each level's by
+        # variant (the plan's plant list gathered on the CPU: 32 bytes a plant drawn, rewritten per frame)
+        self.instance_buf = ctx.buffer(reserve=max(1, len(self.plant_records)) * RECORD_BYTES)
+        # per level: the variants without their shared topology's padding (geometry.compact_mesh), one vertex
+        # buffer and one index buffer; a level draws with one indirect command per variant and draw group
+        self.meshes: dict[int, CompactMesh] = {m.level: compact_mesh(m) for m in data.meshes}
+        self.mesh_vbo = {k: ctx.buffer(m.vertices.tobytes()) for k, m in self.meshes.items()}
+        self.mesh_ibo = {k: ctx.buffer(m.index.tobytes()) for k, m in self.meshes.items()}
+        self.command_buf = ctx.buffer(reserve=COMMAND_WORDS * 4 * LEVELS * len(DRAW_GROUPS) * cfg.plant_variants)
+        # multi-draw indirect with base instances (GL 4.3); before it, one draw per variant (rebinding offsets)
+        self.multi_draw = self.ctx.version_code >= 430
         # level 4: the LOD cache
         self.frame = tile_frame(cfg.cell_size, data.plant_reach, data.plant_height,
                                 np.radians(cfg.impostor_elevation_deg))
@@ -194,13 +188,16 @@ class FieldGpu:
         return prog
 
     def _vao(self, prog: moderngl.Program, what: tuple) -> moderngl.VertexArray:
-        """The vertex array of ``what`` (("mesh", level, kind), ("impostor",) or ("band",)) for ``prog``."""
-        key = (prog.glo, *what)
+        """The vertex array of ``what`` (("mesh", level, records buffer), ("impostor",) or ("band",)) for
+        ``prog``."""
+        key = (prog.glo, *(x.glo if isinstance(x, moderngl.Buffer) else x for x in what))
         vao = self._vaos.get(key)
         if vao is None:
             if what[0] == "mesh":
-                ibo = self.meshes[what[1:]]
-                vao = self.ctx.vertex_array(prog, [], index_buffer=ibo, index_element_size=4)
+                level, records = what[1:]
+                vao = self.ctx.vertex_array(prog, [(self.mesh_vbo[level], "4f 4f", "in_a", "in_b"),
+                                                   (records, "4f 4f /i", "i_p0", "i_p1")],
+                                            index_buffer=self.mesh_ibo[level], index_element_size=4)
             elif what[0] == "impostor":  # i_level feeds only the debug view: absent from the other variants
                 vao = self.ctx.vertex_array(prog, [(self.impostor_buf, "3f 1f 2f 1f 1f /i", "i_centre", "i_face",
                                                     "i_tiles", "i_blend", "i_level")], skip_errors=True)
@@ -228,27 +225,70 @@ class FieldGpu:
 
     def _plant_uniforms(self) -> dict[str, Any]:
         cfg = self.cfg
-        return dict(mesh_tex=0, plant_tex=1, plant_list=2,
-                    stem_color=tuple(cfg.stem_color), leaf_base_color=tuple(cfg.leaf_base_color),
+        return dict(stem_color=tuple(cfg.stem_color), leaf_base_color=tuple(cfg.leaf_base_color),
                     leaf_tip_color=tuple(cfg.leaf_tip_color))
 
-    def _draw_level(self, prog: moderngl.Program, level: int, offset: int, plants: int) -> None:
-        """``plants`` listed plants (from ``offset`` in the plant list) at ``level``: one instanced, indexed draw
-        per primitive type."""
-        if plants <= 0:
-            return
-        tex, verts = self.mesh_tex[level]
-        tex.use(0)
-        prog["mesh_verts"].value = verts
-        prog["list_offset"].value = offset
-        for kind, mode, first, count, cull in self.mesh_draws[level]:
-            if cull:  # closed tubes: the faces turned away from the eye are hidden by those turned towards it
-                self.ctx.front_face, self.ctx.cull_face = "ccw", "back"
-                self.ctx.enable(moderngl.CULL_FACE)
-            self._vao(prog, ("mesh", level, kind)).render(mode, vertices=count, first=first, instances=plants)
-            if cull:
-                self.ctx.disable(moderngl.CULL_FACE)
-            self.draw_calls += 1
+    def _upload_plants(self, buffer: moderngl.Buffer, records: np.ndarray, counts: list[int]) -> np.ndarray:
+        """Write the plant ``records`` (the levels' plants one after the other, ``counts`` per level) into
+        ``buffer`` grouped by variant within each level (stable: a level's near-first order holds within each
+        variant), and return the indirect commands (levels × draw groups × variants, :data:`COMMAND_WORDS`)."""
+        variants = self.cfg.plant_variants
+        variant = records[:, 7].astype(np.int64)
+        order, per_variant, offset = [], np.zeros((LEVELS, variants), np.int64), 0
+        for level, n in enumerate(counts):
+            v = variant[offset:offset + n]
+            order.append(offset + np.argsort(v, kind="stable"))
+            per_variant[level] = np.bincount(v, minlength=variants)
+            offset += n
+        order = np.concatenate(order) if order else np.zeros(0, np.int64)
+        buffer.write(np.ascontiguousarray(records[order]))
+        base_instance = (np.cumsum(per_variant.ravel()) - per_variant.ravel()).reshape(LEVELS, variants)
+        commands = np.zeros((LEVELS, len(DRAW_GROUPS), variants, COMMAND_WORDS), np.uint32)
+        for level, mesh in self.meshes.items():
+            for g, group in enumerate(DRAW_GROUPS):
+                commands[level, g] = np.stack([mesh.count[group], per_variant[level], mesh.first[group],
+                                               mesh.vertex_base, base_instance[level]], axis=1)
+        return commands
+
+    def _draw_plants(self, prog: moderngl.Program, records: moderngl.Buffer, commands: np.ndarray,
+                     levels: range | list[int], set_level=None) -> None:
+        """Draw the plants of ``levels`` uploaded by :meth:`_upload_plants`: per level and draw group one
+        multi-draw indirect call (one command per variant), or one draw per variant before GL 4.3."""
+        if self.multi_draw:
+            self.command_buf.write(commands.tobytes())
+        ctx = self.ctx
+        for level in levels:
+            mesh = self.meshes[level]
+            if not commands[level, 0, :, 1].any():
+                continue
+            if set_level is not None:
+                set_level(level)
+            vao = self._vao(prog, ("mesh", level, records))
+            for group in mesh.groups:
+                g = DRAW_GROUPS.index(group)
+                mode, cull = GROUP_DRAWS[group]
+                if cull:
+                    ctx.front_face, ctx.cull_face = "ccw", "back"
+                    ctx.enable(moderngl.CULL_FACE)
+                if self.multi_draw:
+                    vao.render_indirect(self.command_buf, mode, count=commands.shape[2],
+                                        first=(level * len(DRAW_GROUPS) + g) * commands.shape[2])
+                    self.draw_calls += 1
+                else:
+                    for count, instances, first, base_vertex, base_instance in commands[level, g]:
+                        if not (count and instances):
+                            continue
+                        vao.bind(prog["in_a"].location, "f", self.mesh_vbo[level], "4f", offset=32 * int(base_vertex),
+                                 stride=32)
+                        vao.bind(prog["in_b"].location, "f", self.mesh_vbo[level], "4f",
+                                 offset=32 * int(base_vertex) + 16, stride=32)
+                        for name, start in (("i_p0", 0), ("i_p1", 16)):
+                            vao.bind(prog[name].location, "f", records, "4f",
+                                     offset=RECORD_BYTES * int(base_instance) + start, stride=RECORD_BYTES, divisor=1)
+                        vao.render(mode, vertices=int(count), first=int(first), instances=int(instances))
+                        self.draw_calls += 1
+                if cull:
+                    ctx.disable(moderngl.CULL_FACE)
 
     # ------------------------------------------------------------------------------- level 4 (cache)
     def _cache_extra(self) -> dict[str, Any]:
@@ -296,9 +336,9 @@ class FieldGpu:
         n = cfg.plants_per_cell
         offsets = state.layout_offset.reshape(-1, 2)
         local = np.column_stack([offsets[:, 0], np.zeros(len(offsets)), offsets[:, 1]])
-        plants = _data_texture(ctx, plant_texels(local, state.layout_yaw.reshape(-1), state.layout_scale.reshape(-1),
-                                                 state.layout_variant.reshape(-1), state.layout_tint.reshape(-1)))
-        listed = _data_texture(ctx, np.arange(layouts * n, dtype=np.int32)[:, None], dtype="i4")
+        records = plant_records(local, state.layout_yaw.reshape(-1), state.layout_scale.reshape(-1),
+                                state.layout_variant.reshape(-1), state.layout_tint.reshape(-1))
+        plants = ctx.buffer(reserve=max(1, n) * RECORD_BYTES)
         try:
             fbo.use()
             fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
@@ -306,10 +346,9 @@ class FieldGpu:
             ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
             prog = self.plant_prog
             set_uniforms(prog, **self._lighting(None), **self._plant_uniforms())
-            plants.use(1)
-            listed.use(2)
             progress = Progress("grass_field: baking the LOD cache", layouts * N_VIEWS)
             for k in range(layouts):
+                commands = self._upload_plants(plants, records[k * n:(k + 1) * n], [0, 0, 0, n])
                 for v in range(N_VIEWS):
                     vp = self.layout.viewport(k * N_VIEWS + v)
                     fbo.viewport = vp
@@ -317,7 +356,7 @@ class FieldGpu:
                     _, _, normal = impostor_basis(v * 2.0 * np.pi / N_VIEWS, self.frame.elevation)
                     set_uniforms(prog, view_proj=bake_view_proj(v, self.frame).T.astype(np.float32).copy(),
                                  camera_pos=tuple(normal * (2.0 * self.frame.depth + 1.0)))
-                    self._draw_level(prog, 3, k * n, n)
+                    self._draw_plants(prog, plants, commands, [3])
                     self.baked_views += 1
                 progress.update((k + 1) * N_VIEWS)
             fbo.scissor = None
@@ -326,7 +365,6 @@ class FieldGpu:
             fbo.release()
             depth.release()
             plants.release()
-            listed.release()
         return np.frombuffer(raw, np.uint8).reshape(h, w, 4).copy()
 
     def _impostor_uniforms(self, view_proj: np.ndarray, eye: np.ndarray, ortho: bool) -> dict[str, Any]:
@@ -538,20 +576,15 @@ class FieldGpu:
         counts = [len(p) for p in plan.plants]
         total = sum(counts)
         if total:
-            self._list_upload[:total] = plan.plant_list if plan.plant_list is not None else np.concatenate(plan.plants)
-            width = self.list_tex.width
-            rows = -(-total // width)
-            self.list_tex.write(self._list_upload[:rows * width].tobytes(), viewport=(0, 0, width, rows))
+            listed = plan.plant_list if plan.plant_list is not None else np.concatenate(plan.plants)
+            commands = self._upload_plants(self.instance_buf, self.plant_records[listed], counts)
             prog = self._program("plant", debug=debug, fog=fog)
             set_uniforms(prog, **lighting, **self._plant_uniforms())
-            self.plant_tex.use(1)
-            self.list_tex.use(2)
-            offset = 0
-            for level, count in enumerate(counts):
-                if debug and count:
-                    prog["debug_level"].value = level
-                self._draw_level(prog, level, offset, count)
-                offset += count
+
+            def set_level(level: int) -> None:
+                prog["debug_level"].value = level
+
+            self._draw_plants(prog, self.instance_buf, commands, range(LEVELS), set_level if debug else None)
         # level 4 (the plan lists the rectangles nearest first)
         if rectangles:
             prog = self._program("impostor", debug=debug, fog=fog)
@@ -572,11 +605,10 @@ class FieldGpu:
         if self._released:
             return
         self._released = True
-        objects = [self.plant_tex, self.list_tex, self.impostor_buf, self.bounds_tex, self.band_buf, self.atlas,
+        objects = [self.instance_buf, self.command_buf, self.impostor_buf, self.bounds_tex, self.band_buf, self.atlas,
                    self.band_tex, self.band_fbo, getattr(self, "band_depth", None)]
         objects += list(self._vaos.values())  # the programs belong to the renderer (shared between fields)
-        objects += [tex for tex, _ in self.mesh_tex.values()]
-        objects += list(self.meshes.values())
+        objects += list(self.mesh_vbo.values()) + list(self.mesh_ibo.values())
         for obj in objects:
             if obj is not None:
                 obj.release()

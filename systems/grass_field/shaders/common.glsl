@@ -9,9 +9,6 @@ ivec2 data_texel(int i) {
 vec4 fetch(sampler2D tex, int i) {
     return texelFetch(tex, data_texel(i), 0);
 }
-int fetch_int(isampler2D tex, int i) {
-    return texelFetch(tex, data_texel(i), 0).r;
-}
 
 // Rotation by azimuth a in the xz plane: (x, z) -> (x cos a - z sin a, x sin a + z cos a).
 vec3 rotate_xz(vec3 v, float a) {

@@ -1,9 +1,9 @@
 #version 330
 #include "lit.glsl"
 #include "common.glsl"
-// Levels 0-3 (table 1), instanced: one instance per plant listed for this level.
-// Instance i draws plant plant_list[list_offset + i]; the indexed vertex comes from the plant's variant:
-// mesh_tex[variant * mesh_verts + gl_VertexID] (2 texels per vertex).
+// Levels 0-3 (table 1), instanced: one instance per plant drawn at this level, its record (render.py's
+// plant_records) a per-instance attribute, its variant's vertices (geometry.compact_mesh) per-vertex attributes:
+// one indirect command per variant sets the base vertex and the base instance (render.py's _draw_plants).
 // Lit per vertex (Gouraud, as the paper's OpenGL pipeline lit its plants), both faces of a leaf: the normal is
 // turned towards the eye.  On llvmpipe the vertex work runs once per vertex while the fragment work runs per
 // covered pixel on a handful of interpolated inputs, and the near plants cover far more pixels than they have
@@ -11,11 +11,10 @@
 // Variants (render.py): DEBUG_LEVELS (the debug view), FOG (the view has fog).  llvmpipe runs both sides of
 // every branch, so the lighting is computed once, with selects, and what a variant leaves out costs nothing.
 uniform mat4 view_proj;
-uniform sampler2D mesh_tex;
-uniform int mesh_verts;
-uniform sampler2D plant_tex;   // per plant: (x, y, z, scale), (cos yaw, sin yaw, tint, variant)
-uniform isampler2D plant_list;
-uniform int list_offset;
+in vec4 in_a;  // the vertex: plant-local position, colour parameter (0 at the blade's root, 1 at the tip)
+in vec4 in_b;  // normal, kind (0 tube, 1 leaf, 2 line or dot)
+in vec4 i_p0;  // the plant: (x, y, z, scale)
+in vec4 i_p1;  // (cos yaw, sin yaw, tint, variant)
 uniform vec3 stem_color;
 uniform vec3 leaf_base_color;
 uniform vec3 leaf_tip_color;
@@ -27,12 +26,7 @@ out vec3 v_color;
 out float v_fog;  // lit.glsl's fog factor
 #endif
 void main() {
-    int plant = fetch_int(plant_list, list_offset + gl_InstanceID);
-    vec4 p0 = fetch(plant_tex, 2 * plant);
-    vec4 p1 = fetch(plant_tex, 2 * plant + 1);
-    int vid = int(p1.w + 0.5) * mesh_verts + gl_VertexID;
-    vec4 a = fetch(mesh_tex, 2 * vid);
-    vec4 b = fetch(mesh_tex, 2 * vid + 1);
+    vec4 p0 = i_p0, p1 = i_p1, a = in_a, b = in_b;
     // rotation by the plant's yaw in the xz plane (common.glsl's rotate_xz, cosine and sine given per plant)
     vec3 world = vec3(a.x * p1.x - a.z * p1.y, a.y, a.x * p1.y + a.z * p1.x) * p0.w + p0.xyz;
     vec3 n = normalize(vec3(b.x * p1.x - b.z * p1.y, b.y, b.x * p1.y + b.z * p1.x));

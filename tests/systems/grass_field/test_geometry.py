@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from systems.grass_field.geometry import (FINE, KIND_LEAF, KIND_TUBE, build_level_meshes, dot_spacing,
-                                          level_geometry, plant_skeleton)
+from systems.grass_field.geometry import (DRAW_GROUPS, FINE, KIND_LEAF, KIND_TUBE, build_level_meshes,
+                                          compact_mesh, dot_spacing, level_geometry, plant_skeleton)
 from systems.grass_field.layout import draw_field
 from tests.systems.grass_field.helpers import paper_config
 
@@ -128,3 +128,41 @@ def test_figure1_parameters_shape_the_plant(paper):
     assert w[0] == pytest.approx(cfg.leaf_width)
     assert w[1] == pytest.approx(cfg.leaf_width * (1 - cfg.leaf_narrowing))
     assert w[2] == 0.0
+
+
+def test_compact_mesh_keeps_every_primitive_that_covers_a_pixel(paper):
+    """Without the shared topology's padding each variant keeps exactly its real primitives, in order (the
+    same vertex data), the tubes before the leaves, and only the vertices they use: the pixels are those of the
+    padded mesh (a collapsed triangle or line covers none, a repeated dot the pixel of its first copy)."""
+    cfg, state = paper
+    for m in build_level_meshes(cfg, state):
+        c = compact_mesh(m)
+        ends = np.append(c.vertex_base, len(c.vertices))
+        assert np.all(np.diff(ends) < m.vertices.shape[1])  # the padding's vertices are gone
+        tubes = 3 * m.tube_triangles
+        padded = {"tubes": (m.triangles[:tubes], 3), "leaves": (m.triangles[tubes:], 3), "lines": (m.lines, 2),
+                  "points": (m.points, 1)}
+        for v in range(cfg.plant_variants):
+            verts = m.vertices[v]
+            own = c.vertices[ends[v]:ends[v + 1]]
+            used = np.zeros(len(own), bool)
+            for group in DRAW_GROUPS:
+                index, k = padded[group]
+                prims = verts[np.asarray(index).reshape(-1, k)]
+                p = prims[..., :3].astype(np.float64)
+                if k == 3:
+                    real = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1) > 1e-12
+                elif k == 2:
+                    real = np.linalg.norm(p[:, 1] - p[:, 0], axis=1) > 1e-12
+                else:
+                    real = np.arange(len(prims)) < m.real_points[v]
+                    if real.any():  # the padding repeats the last dot
+                        assert np.all(prims[~real] == prims[real][-1])
+                first, count = int(c.first[group][v]), int(c.count[group][v])
+                local = c.index[first:first + count]
+                assert np.array_equal(own[local].reshape(prims[real].shape), prims[real])
+                used[local] = True
+            assert used.all()  # no vertex is shaded for nothing
+            assert (c.count["tubes"][v] + c.count["leaves"][v]) // 3 == m.real_triangles[v]
+            assert c.count["lines"][v] // 2 == m.real_lines[v] and c.count["points"][v] == m.real_points[v]
+        assert c.groups == [g for g in DRAW_GROUPS if any(c.count[g])]
