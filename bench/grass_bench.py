@@ -232,7 +232,7 @@ def main(argv: list[str] | None = None) -> int:
               f"{pf[0]:8.2f} {pf[1]:6.2f} {pf[2]:6.2f} | {runs[0]['prims']:9.0f} {runs[1]['prims']:8.0f} "
               f"{runs[2]['prims']:8.0f} | {pp[0]:8d} {pp[1]:7d} {pp[2]:7d} | {runs[2]['warm']:6.2f}", flush=True)
     print("\nprims = the paper's count (triangles + lines + points really drawn; 2 per rectangle); the GPU was "
-          "handed, padding included, (m1/m2/m3):")
+          "handed (its primitives-generated query; m1/m2/m3):")
     for key, runs in results.items():
         print(f"  grid {key[0]:>2}, {key[1]:>2} plants: " + " / ".join(f"{r['submitted']:.0f}" for r in runs)
               + f"   draw calls per frame (m3): {runs[2]['calls']}, cached views baked: {runs[2]['baked']}, "
