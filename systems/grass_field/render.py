@@ -63,15 +63,15 @@ def _with_defines(source: str, defines: tuple[str, ...]) -> str:
     return head + "\n" + "".join(f"#define {name} 1\n" for name in defines) + rest
 
 
-def _data_texture(ctx: moderngl.Context, texels: np.ndarray, dtype: str = "f4") -> moderngl.Texture:
+def _data_texture(ctx: moderngl.Context, texels: np.ndarray) -> moderngl.Texture:
     """A 2-D texture holding ``texels`` (n, c) row by row, ``TEXTURE_WIDTH`` texels per row; nearest filtering."""
     texels = np.asarray(texels)
     n, comps = max(1, len(texels)), texels.shape[1]
     w = TEXTURE_WIDTH  # always: the shaders split an index into (column, row) with a mask and a shift
     h = -(-n // w)
-    data = np.zeros((w * h, comps), dtype=np.float32 if dtype == "f4" else np.int32)
+    data = np.zeros((w * h, comps), dtype=np.float32)
     data[:len(texels)] = texels
-    tex = ctx.texture((w, h), comps, data.tobytes(), dtype=dtype)
+    tex = ctx.texture((w, h), comps, data.tobytes(), dtype="f4")
     tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
     return tex
 
@@ -140,7 +140,14 @@ class FieldGpu:
         self.meshes: dict[int, CompactMesh] = {m.level: compact_mesh(m) for m in data.meshes}
         self.mesh_vbo = {k: ctx.buffer(m.vertices.tobytes()) for k, m in self.meshes.items()}
         self.mesh_ibo = {k: ctx.buffer(m.index.tobytes()) for k, m in self.meshes.items()}
-        self.command_buf = ctx.buffer(reserve=COMMAND_WORDS * 4 * LEVELS * len(DRAW_GROUPS) * cfg.plant_variants)
+        # the commands' per-mesh words (index count, first index, base vertex); _upload_plants adds the instances
+        self.mesh_commands = np.zeros((LEVELS, len(DRAW_GROUPS), cfg.plant_variants, COMMAND_WORDS), np.uint32)
+        for level, mesh in self.meshes.items():
+            for g, group in enumerate(DRAW_GROUPS):
+                self.mesh_commands[level, g, :, 0] = mesh.count[group]
+                self.mesh_commands[level, g, :, 2] = mesh.first[group]
+                self.mesh_commands[level, g, :, 3] = mesh.vertex_base
+        self.command_buf = ctx.buffer(reserve=self.mesh_commands.nbytes)
         # multi-draw indirect with base instances (GL 4.3); before it, one draw per variant (rebinding offsets)
         self.multi_draw = self.ctx.version_code >= 430
         # level 4: the LOD cache
@@ -228,26 +235,24 @@ class FieldGpu:
         return dict(stem_color=tuple(cfg.stem_color), leaf_base_color=tuple(cfg.leaf_base_color),
                     leaf_tip_color=tuple(cfg.leaf_tip_color))
 
-    def _upload_plants(self, buffer: moderngl.Buffer, records: np.ndarray, counts: list[int]) -> np.ndarray:
-        """Write the plant ``records`` (the levels' plants one after the other, ``counts`` per level) into
-        ``buffer`` grouped by variant within each level (stable: a level's near-first order holds within each
-        variant), and return the indirect commands (levels × draw groups × variants, :data:`COMMAND_WORDS`)."""
+    def _upload_plants(self, buffer: moderngl.Buffer, records: np.ndarray, listed: np.ndarray,
+                       counts: list[int]) -> np.ndarray:
+        """Write the records of the plants ``listed`` (the levels' plants one after the other, ``counts`` per
+        level) into ``buffer`` grouped by variant within each level (stable: a level's near-first order holds
+        within each variant), and return the indirect commands (levels × draw groups × variants,
+        :data:`COMMAND_WORDS`): the meshes' part made once, the instance counts and base instances per call."""
         variants = self.cfg.plant_variants
-        variant = records[:, 7].astype(np.int64)
+        variant = records[listed, 7].astype(np.int64)
         order, per_variant, offset = [], np.zeros((LEVELS, variants), np.int64), 0
         for level, n in enumerate(counts):
             v = variant[offset:offset + n]
             order.append(offset + np.argsort(v, kind="stable"))
             per_variant[level] = np.bincount(v, minlength=variants)
             offset += n
-        order = np.concatenate(order) if order else np.zeros(0, np.int64)
-        buffer.write(np.ascontiguousarray(records[order]))
-        base_instance = (np.cumsum(per_variant.ravel()) - per_variant.ravel()).reshape(LEVELS, variants)
-        commands = np.zeros((LEVELS, len(DRAW_GROUPS), variants, COMMAND_WORDS), np.uint32)
-        for level, mesh in self.meshes.items():
-            for g, group in enumerate(DRAW_GROUPS):
-                commands[level, g] = np.stack([mesh.count[group], per_variant[level], mesh.first[group],
-                                               mesh.vertex_base, base_instance[level]], axis=1)
+        buffer.write(records[listed[np.concatenate(order)]])
+        commands = self.mesh_commands.copy()
+        commands[..., 1] = per_variant[:, None, :]
+        commands[..., 4] = (np.cumsum(per_variant.ravel()) - per_variant.ravel()).reshape(LEVELS, 1, variants)
         return commands
 
     def _draw_plants(self, prog: moderngl.Program, records: moderngl.Buffer, commands: np.ndarray,
@@ -257,35 +262,35 @@ class FieldGpu:
         if self.multi_draw:
             self.command_buf.write(commands.tobytes())
         ctx = self.ctx
+        variants = commands.shape[2]
         for level in levels:
-            mesh = self.meshes[level]
             if not commands[level, 0, :, 1].any():
                 continue
             if set_level is not None:
                 set_level(level)
             vao = self._vao(prog, ("mesh", level, records))
-            for group in mesh.groups:
-                g = DRAW_GROUPS.index(group)
+            for g, group in enumerate(DRAW_GROUPS):
+                if group not in self.meshes[level].groups:
+                    continue
                 mode, cull = GROUP_DRAWS[group]
                 if cull:
                     ctx.front_face, ctx.cull_face = "ccw", "back"
                     ctx.enable(moderngl.CULL_FACE)
                 if self.multi_draw:
-                    vao.render_indirect(self.command_buf, mode, count=commands.shape[2],
-                                        first=(level * len(DRAW_GROUPS) + g) * commands.shape[2])
+                    vao.render_indirect(self.command_buf, mode, count=variants,
+                                        first=(level * len(DRAW_GROUPS) + g) * variants)
                     self.draw_calls += 1
                 else:
-                    for count, instances, first, base_vertex, base_instance in commands[level, g]:
+                    for count, instances, first, base_vertex, base_instance in commands[level, g].tolist():
                         if not (count and instances):
                             continue
-                        vao.bind(prog["in_a"].location, "f", self.mesh_vbo[level], "4f", offset=32 * int(base_vertex),
-                                 stride=32)
-                        vao.bind(prog["in_b"].location, "f", self.mesh_vbo[level], "4f",
-                                 offset=32 * int(base_vertex) + 16, stride=32)
-                        for name, start in (("i_p0", 0), ("i_p1", 16)):
-                            vao.bind(prog[name].location, "f", records, "4f",
-                                     offset=RECORD_BYTES * int(base_instance) + start, stride=RECORD_BYTES, divisor=1)
-                        vao.render(mode, vertices=int(count), first=int(first), instances=int(instances))
+                        for name, buf, at, divisor in (("in_a", self.mesh_vbo[level], 32 * base_vertex, 0),
+                                                       ("in_b", self.mesh_vbo[level], 32 * base_vertex + 16, 0),
+                                                       ("i_p0", records, RECORD_BYTES * base_instance, 1),
+                                                       ("i_p1", records, RECORD_BYTES * base_instance + 16, 1)):
+                            vao.bind(prog[name].location, "f", buf, "4f", offset=at, stride=32,  # 8 floats both
+                                     divisor=divisor)
+                        vao.render(mode, vertices=count, first=first, instances=instances)
                         self.draw_calls += 1
                 if cull:
                     ctx.disable(moderngl.CULL_FACE)
@@ -348,7 +353,7 @@ class FieldGpu:
             set_uniforms(prog, **self._lighting(None), **self._plant_uniforms())
             progress = Progress("grass_field: baking the LOD cache", layouts * N_VIEWS)
             for k in range(layouts):
-                commands = self._upload_plants(plants, records[k * n:(k + 1) * n], [0, 0, 0, n])
+                commands = self._upload_plants(plants, records, np.arange(k * n, (k + 1) * n), [0, 0, 0, n])
                 for v in range(N_VIEWS):
                     vp = self.layout.viewport(k * N_VIEWS + v)
                     fbo.viewport = vp
@@ -577,7 +582,7 @@ class FieldGpu:
         total = sum(counts)
         if total:
             listed = plan.plant_list if plan.plant_list is not None else np.concatenate(plan.plants)
-            commands = self._upload_plants(self.instance_buf, self.plant_records[listed], counts)
+            commands = self._upload_plants(self.instance_buf, self.plant_records, listed, counts)
             prog = self._program("plant", debug=debug, fog=fog)
             set_uniforms(prog, **lighting, **self._plant_uniforms())
 
