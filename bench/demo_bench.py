@@ -91,6 +91,18 @@ def main(width: int = 1280, height: int = 720, warmup: int = 30, frames: int = 6
         app.render_frame()
     print("per-pass breakdown (each pass timed with a finish, so the sum exceeds the plain frame):")
     print(renderer.timer.report())
+    # where the main thread blocks: no finish between passes; a pass that samples what queued passes draw
+    # waits for the raster threads (llvmpipe), and neither side overlaps the other meanwhile
+    renderer.timer.waits = True
+    renderer.timer.totals.clear()
+    renderer.timer.wait_totals.clear()
+    renderer.timer.frames = 0
+    for _ in range(frames // 2):
+        app.step(1)
+        app.render_frame()
+        ctx.finish()
+    renderer.timer.enabled = renderer.timer.waits = False
+    print(renderer.timer.report_waits(top=12))
 
 
 def _cpu_ns() -> tuple[int, int]:

@@ -66,20 +66,45 @@ def gl_flush() -> None:
     _gl_flush()
 
 
+def _thread_busy_ns() -> int:
+    """This thread's CPU time plus the time it waited runnable for a core (Linux ``schedstat``), in ns: wall
+    time minus this is the time it was blocked, not counting other threads holding the cores.  The CPU time
+    alone elsewhere."""
+    try:
+        with open("/proc/thread-self/schedstat", "rb") as f:
+            run, queued = f.read().split()[:2]
+        return int(run) + int(queued)
+    except (OSError, ValueError):
+        return time.thread_time_ns()
+
+
 class PassTimer:
-    """Per-pass timings: GL timer queries when profiling (exact GPU time), CPU time otherwise."""
+    """Per-pass timings: GL timer queries when profiling (exact GPU time), CPU time otherwise.
+
+    With ``waits`` on (and ``gpu`` off) no pass is followed by a finish: each pass's wall time and the main
+    thread's busy time during it (CPU plus waiting runnable for a core) are recorded, and their difference
+    (:attr:`wait_totals`) is the time the main thread spent blocked in the driver.  On llvmpipe that is where a pass reads what queued passes draw (a
+    sampled render target, a memory barrier): the raster threads must finish first, so these waits show where
+    the frame's main thread and raster threads stop overlapping."""
 
     def __init__(self, ctx: moderngl.Context) -> None:
         self.ctx = ctx
         self.enabled = False
         self.gpu = True
+        self.waits = False
         self.last: dict[str, float] = {}  # pass -> milliseconds (last frame)
         self.totals: dict[str, float] = {}
+        self.wait_totals: dict[str, float] = {}  # pass -> milliseconds blocked (``waits`` mode)
         self.frames = 0
 
     def wrap(self, name: str, execute: Callable[[Any], None]) -> Callable[[Any], None]:
         def timed(pc: Any) -> None:
-            if self.enabled and self.gpu:
+            if self.enabled and self.waits and not self.gpu:
+                start, busy = time.perf_counter(), _thread_busy_ns()
+                execute(pc)
+                ms, busy_ms = (time.perf_counter() - start) * 1e3, (_thread_busy_ns() - busy) / 1e6
+                self.wait_totals[name] = self.wait_totals.get(name, 0.0) + max(ms - busy_ms, 0.0)
+            elif self.enabled and self.gpu:
                 try:
                     query = self.ctx.query(time=True)
                     with query:
@@ -109,6 +134,21 @@ class PassTimer:
         rows = sorted(self.totals.items(), key=lambda kv: -kv[1])
         lines = [f"per-pass time, mean over {self.frames} frame(s) ({kind}):"]
         lines += [f"  {name:<40s} {total / self.frames:8.3f} ms" for name, total in rows]
+        return "\n".join(lines)
+
+    def report_waits(self, top: int | None = None) -> str:
+        """The ``waits`` mode's figures: per pass, its wall time and how much of it the main thread was blocked,
+        the passes that waited longest first (``top`` of them), and the sums over every pass."""
+        if not self.frames:
+            return "no frames rendered"
+        n = self.frames
+        rows = sorted(self.totals.items(), key=lambda kv: -self.wait_totals.get(kv[0], 0.0))
+        lines = [f"main thread blocked per pass, mean over {n} frame(s) (no finish between passes; wall, of it "
+                 f"blocked):"]
+        lines += [f"  {name:<40s} {total / n:8.3f} ms, blocked {self.wait_totals.get(name, 0.0) / n:7.3f} ms"
+                  for name, total in rows[:top]]
+        lines.append(f"  {'every pass':<40s} {sum(self.totals.values()) / n:8.3f} ms, blocked "
+                     f"{sum(self.wait_totals.values()) / n:7.3f} ms")
         return "\n".join(lines)
 
 
