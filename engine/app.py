@@ -62,6 +62,7 @@ class App:
         self.schedule = self.registry.schedule
         self.clock = FixedClock(self.config.scene.fixed_dt, self.config.scene.max_catchup_steps)
         self.records = []
+        self.restart_errors: list[str] = []  # why the last restart kept the running world (an asset broke)
         self.world = self._new_world()
         self.renderer: Any = None
         self.started = False
@@ -91,8 +92,8 @@ class App:
         world.insert_resource(TimeControl(), state=True)
         for setup in self.registry.world_setup:
             setup(world)
-        self.world = world
-        self.records = spawn_plan(world, self.registry, self.plan) if self.plan is not None else []
+        records = spawn_plan(world, self.registry, self.plan) if self.plan is not None else []
+        self.world, self.records = world, records  # only a fully built world replaces the running one
         return world
 
     @property
@@ -129,7 +130,14 @@ class App:
     def restart(self) -> None:
         """Rebuild the world from the current scene plan (same seed): the game's R key."""
         renderer, source = self.renderer, self.world.try_resource(InputSource)
-        self.world = self._new_world()
+        try:
+            self._new_world()
+        except ConfigError as exc:  # an asset changed on disk since the scene loaded: keep playing this world
+            self.world.resource(TimeControl).restart_requested = False
+            self.restart_errors = [str(p) for p in exc.problems]
+            log.error("restart failed; keeping the current world:\n%s", exc)
+            return
+        self.restart_errors = []
         if source is not None:
             self.world.insert_resource(source)
         self.started = False

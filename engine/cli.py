@@ -156,6 +156,12 @@ def validate_file(path: Path, registry: Registry):
                                                       f"'{path.parent.name}/'")])
         return validate(spec.model, data, str(path), (), text, context={"configs_root": path.parent.parent.parent})
     elif "entities" in data or "scene" in data or path.parent.name == "scenes":
+        plugins = data.get("scene", {}).get("plugins") if isinstance(data.get("scene"), dict) else None
+        if isinstance(plugins, list) and all(isinstance(p, str) for p in plugins):
+            try:  # the scene's own plugins, as App loads it: a component of a plugin it does not list is unknown
+                registry = default_registry(plugins)
+            except RegistryError as exc:
+                raise ConfigError([Problem(str(path), "scene.plugins", str(exc), plugins)]) from None
         return plan_scene(path, registry)
     else:
         raise ConfigError([Problem(str(path), "", "neither a scene (with [scene] or [[entities]]) nor a preset "

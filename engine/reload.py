@@ -102,33 +102,61 @@ class HotReloader:
 
     # ----------------------------------------------------------------- applying
     def _apply(self, plan) -> list[str]:
+        """Bring the world to ``plan`` entity by entity.  A planned entity keeps the live entity it was built
+        as: the old one at the same index with the same name, else the first unused old one of that name (so
+        inserting an entity above the others keeps every simulation running).  An entity whose update fails
+        keeps what it had; ``app.records`` always ends up describing the world as it is."""
         app, world = self.app, self.app.world
         changes: list[str] = []
         records: list[EntityRecord] = []
         old_records = list(app.records)
+        used: set[int] = set()
+
+        def match(i: int, name: str) -> EntityRecord | None:
+            candidates = ([i] if i < len(old_records) else []) + list(range(len(old_records)))
+            for j in candidates:
+                old = old_records[j]
+                if j not in used and old.name == name and world.alive(old.entity):
+                    used.add(j)
+                    return old
+            return None
+
+        matched = [match(i, ent.name) for i, ent in enumerate(plan.entities)]
+        # an entity renamed in place (no other old entity of its name) is replaced by the new one
+        replaced = [None if m is not None or i >= len(old_records) or i in used or not world.alive(old_records[i].entity)
+                    else old_records[i] for i, m in enumerate(matched)]
+        for i, r in enumerate(replaced):
+            if r is not None:
+                used.add(i)
         for i, ent in enumerate(plan.entities):
-            old = old_records[i] if i < len(old_records) else None
-            if old is None or old.name != ent.name or not world.alive(old.entity):
-                try:  # build the new entity first: if it fails, the old one stays
+            old, previous = matched[i], replaced[i]
+            if old is None:
+                try:  # build the new entity first: if it fails, the entity it replaces stays
                     record = spawn_entity(world, app.registry, plan, i, ent)
                 except ConfigError as exc:
                     self.status.errors.extend(str(p) for p in exc.problems)
                     changes.append(f"entities[{i}] '{ent.name}': spawn failed"
-                                   + (f", kept '{old.name}'" if old is not None and world.alive(old.entity) else ""))
-                    if old is not None and world.alive(old.entity):
-                        records.append(old)
+                                   + (f", kept '{previous.name}'" if previous is not None else ""))
+                    if previous is not None:
+                        records.append(previous)
                     continue
-                if old is not None and world.alive(old.entity):
-                    world.despawn(old.entity)
-                    changes.append(f"despawned '{old.name}'")
+                if previous is not None:
+                    world.despawn(previous.entity)
+                    changes.append(f"despawned '{previous.name}'")
                 records.append(record)
                 changes.append(f"spawned '{ent.name}'")
                 continue
             records.append(old)
-            changes += self._apply_components(plan, i, old, ent)
-            changes += self._apply_scripts(old, ent)
-        for old in old_records[len(plan.entities):]:
-            if world.alive(old.entity):
+            try:
+                changes += self._apply_components(plan, i, old, ent)
+                changes += self._apply_scripts(old, ent)
+            except Exception as exc:  # noqa: BLE001 - a plugin's hook failing keeps this entity as it was
+                log.error("reload of %s: entities[%d] '%s' failed", plan.file, i, ent.name, exc_info=exc)
+                self.status.errors.append(f"{plan.file}: entities[{i}] '{ent.name}': update failed: "
+                                          f"{type(exc).__name__}: {exc}")
+                changes.append(f"entities[{i}] '{ent.name}': update failed, kept as it was")
+        for j, old in enumerate(old_records):
+            if j not in used and world.alive(old.entity):
                 world.despawn(old.entity)
                 changes.append(f"despawned '{old.name}'")
         app.records = records

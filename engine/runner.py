@@ -13,6 +13,7 @@ from engine.builtin import InputSource
 from engine.input import InputRecorder, InputReplay
 
 log = logging.getLogger("engine.run")
+MAX_REPLAY_TICKS = 10**9  # a replay header asking for more is a broken file, not a run to start
 DEFAULT_HEADLESS_STEPS = 300
 
 
@@ -47,7 +48,12 @@ def run_command(args: argparse.Namespace) -> int:
         return 1
     steps = args.steps
     if source is not None and source.replay is not None and steps is None:
-        steps = int(source.replay.meta.get("ticks", 0))
+        ticks = source.replay.meta.get("ticks", 0)
+        if isinstance(ticks, bool) or not isinstance(ticks, int) or not 0 <= ticks <= MAX_REPLAY_TICKS:
+            print(f"error: {args.replay}:1: ticks: expected an integer in [0, {MAX_REPLAY_TICKS}], got {ticks!r}",
+                  file=sys.stderr)
+            return 1
+        steps = ticks
     if args.no_render:
         app.step(steps if steps is not None else DEFAULT_HEADLESS_STEPS)
     else:

@@ -20,7 +20,7 @@ without problems is spawned, so a bad edit never leaves a half-built world.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -262,6 +262,9 @@ def _load_script(registry: Registry, ref: ScriptRef, file: Path, text: str, key:
         return cls, cls.Params.model_validate(ref.params)
     except ValidationError as exc:
         raise ConfigError(model_problems(exc, cls.Params, str(file), key + ("params",), text)) from None
+    except Exception as exc:  # a script's own validator raising something else must not take loading down
+        problem = build_problem(file, format_key(key + ("params",)), exc)
+        raise ConfigError([replace(problem, line=locate_line(text, key + ("params",)))]) from None
 
 
 
@@ -307,15 +310,19 @@ def spawn_entity(world: World, registry: Registry, plan: ScenePlan, index: int, 
         for comp in built:
             world.add(entity, comp)
         record.components[cname] = (cfg, [type(c) for c in built])
+    slots = []
+    for j, (cls, params, enabled) in enumerate(ent.scripts or ()):
+        try:  # a script's constructor raising is the scene's error, like a component that cannot be built
+            slot = make_slot(world, entity, cls, params)
+        except Exception as exc:
+            problems.append(build_problem(plan.file, f"entities[{index}].scripts[{j}]", exc))
+            continue
+        slot.enabled = enabled
+        slots.append(slot)
     if problems:
         world.despawn(entity)
         raise ConfigError(problems)
-    if ent.scripts:
-        slots = []
-        for cls, params, enabled in ent.scripts:
-            slot = make_slot(world, entity, cls, params)
-            slot.enabled = enabled
-            slots.append(slot)
+    if slots:
         world.add(entity, Scripts(slots))
     return record
 

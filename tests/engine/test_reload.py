@@ -133,3 +133,107 @@ def test_a_rebuild_that_fails_keeps_the_old_component(tmp_path):
     (root / "scenes" / "s.toml").write_text(SCENE.format(capacity=9, speed=10.0))
     reloader.poll()  # does not raise
     assert state_of(app) is state and any("bigger tank" in e for e in reloader.status.errors)
+
+
+# ------------------------------------------------------------------ failures part-way, insertions, restarts
+from pydantic import field_validator  # noqa: E402
+
+from engine.app import TimeControl  # noqa: E402
+from engine.config import ConfigError  # noqa: E402
+from engine.script import Script, script  # noqa: E402
+
+
+class BoomParams(ConfigModel):
+    fuse: float = 1.0
+
+    @field_validator("fuse")
+    @classmethod
+    def _fuse(cls, v: float) -> float:
+        return 1.0 / v  # ZeroDivisionError for 0: not a ValueError
+
+
+@script("boom")
+class Boom(Script):
+    Params = BoomParams
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        if self.params.fuse < 0.0:
+            raise RuntimeError("the script's constructor failed")
+
+
+@script("dud")
+class Dud(Script):
+    def __init__(self, *args, **kwargs) -> None:
+        raise RuntimeError("a script that cannot start")
+
+
+PLAIN = """
+[[entities]]
+name = "{first}"
+[entities.components.Pump]
+rate = 1.0
+[[entities]]
+name = "second"
+scripts = [{{ name = "{script}", params = {{ fuse = {fuse} }} }}]
+[entities.components.Pump]
+rate = 2.0
+"""
+
+
+def plain(first="first", fuse=1.0, script="boom"):
+    return PLAIN.format(first=first, fuse=fuse, script=script)
+
+
+def plain_app(tmp_path, first="first", fuse=1.0):
+    scene = tmp_path / "s.toml"
+    scene.write_text(plain(first, fuse))
+    reg = registry()
+    reg.add_scripts([Boom, Dud])
+    return App(scene, registry=reg), scene
+
+
+def test_a_script_whose_constructor_or_validator_raises_is_a_config_error_naming_the_key(tmp_path):
+    for fuse, needle in ((-1.0, "RuntimeError: the script's constructor failed"), (0.0, "ZeroDivisionError")):
+        try:
+            plain_app(tmp_path, fuse=fuse)
+        except ConfigError as exc:
+            text = str(exc)
+            assert "s.toml" in text and "entities[1].scripts[0]" in text and needle in text
+        else:
+            raise AssertionError("loading should have failed")
+
+
+def test_a_reload_that_fails_part_way_keeps_the_records_true_and_the_next_reload_spawns_nothing_twice(tmp_path):
+    app, scene = plain_app(tmp_path)
+    reloader = HotReloader(app)
+    scene.write_text(plain("renamed", script="dud").replace("fuse = 1.0", ""))  # a new entity; a script that fails
+    reloader.reload()
+    assert any("entities[1] 'second'" in e and "a script that cannot start" in e for e in reloader.status.errors)
+    scene.write_text(plain("renamed"))
+    reloader.reload()
+    alive = [e for e in app.world.entities if app.world.try_get(e, PumpConfig) is not None]
+    assert sorted(r.entity for r in app.records) == sorted(alive) and len(alive) == 2
+    assert [r.name for r in app.records] == ["renamed", "second"]
+
+
+def test_an_entity_inserted_above_the_others_keeps_their_simulation_state(tmp_path):
+    app, scene = plain_app(tmp_path)
+    app.step(3)
+    states = [state_of(app, 0), state_of(app, 1)]
+    scene.write_text('[[entities]]\nname = "marker"\n' + plain())
+    HotReloader(app).reload()
+    assert [r.name for r in app.records] == ["marker", "first", "second"]
+    assert state_of(app, 1) is states[0] and state_of(app, 2) is states[1] and states[1].levels[0] == 6.0
+
+
+def test_a_restart_that_cannot_build_the_scene_keeps_the_running_world(tmp_path):
+    app, scene = plain_app(tmp_path)
+    app.step(2)
+    world, state = app.world, state_of(app, 1)
+    app.plan.entities[1].scripts[0] = (Boom, BoomParams.model_construct(fuse=-1.0), True)  # as a broken asset would
+    app.world.resource(TimeControl).restart_requested = True
+    app.step(1)
+    assert app.world is world and state_of(app, 1) is state and state.levels[0] == 6.0
+    assert app.restart_errors and "entities[1].scripts[0]" in app.restart_errors[0]
+    assert not world.resource(TimeControl).restart_requested  # asked once, not every tick

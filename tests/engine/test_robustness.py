@@ -460,3 +460,22 @@ def test_strict_run_on_the_command_line_reports_without_crashing(tmp_path, capsy
     code = main(["run", str(path), "--no-render", "--steps", "3", "--strict"])
     err = capsys.readouterr().err
     assert code == 1 and "error: script 'faulty_on_update' on entity 1 ('hero') raised in on_update: boom" in err
+
+
+def test_a_replay_header_with_a_bad_tick_count_is_an_error_naming_the_file(tmp_path, capsys):
+    recording = tmp_path / "input.jsonl"
+    for ticks in ('"abc"', "1e18", "-4", "true"):
+        recording.write_text(f'{{"format": "ecsfx-input/1", "ticks": {ticks}}}\n')
+        code, text = cli(capsys, "run", "configs/scenes/sandbox.toml", "--no-render", "--replay", str(recording))
+        assert code == 1 and f"{recording}:1: ticks:" in text
+
+
+def test_validate_plans_a_scene_with_its_own_plugins(tmp_path, capsys):
+    root = configs(tmp_path)
+    unknown = scene(root, '[scene]\nplugins = ["render", "nope"]\n')
+    code, text = cli(capsys, "validate", str(unknown))
+    assert code == 1 and "scene.plugins" in text and "nope" in text
+    not_listed = scene(root, '[scene]\nplugins = ["render"]\n[[entities]]\nname = "d"\n'
+                             '[entities.components.DustDevil]\n')
+    code, text = cli(capsys, "validate", str(not_listed))
+    assert code == 1 and "DustDevil" in text and "entities[0]" in text
