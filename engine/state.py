@@ -24,6 +24,9 @@ if TYPE_CHECKING:
 
 
 def _feed(h: Any, obj: Any) -> None:
+    if isinstance(obj, (np.bool_, np.integer, np.floating)) and not isinstance(obj, np.longdouble):
+        obj = obj.item()  # a numpy scalar hashes as the Python number of the same value (a count kept as
+        # np.int64 by one code path and int by another is the same state); float32 widens exactly
     if obj is None or isinstance(obj, (bool, str)):
         h.update(f"{type(obj).__name__}:{obj!s}|".encode())
     elif isinstance(obj, Enum):
@@ -82,6 +85,7 @@ def state_hash(world: World) -> str:
     h = hashlib.blake2b(digest_size=16)
     _feed(h, world.tick)
     _feed(h, world.seed)
+    _feed(h, world._next_id)  # the next entity id: it decides the ids, and so the order, of entities to come
     for entity, comps in world.iter_state():
         _feed(h, entity)
         for comp in comps:

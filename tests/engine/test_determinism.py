@@ -94,3 +94,18 @@ def test_derived_generator_is_the_stream_and_stays_unregistered():
     before = streams.states()
     derive_generator(11, "other").random(2)
     assert streams.states() == before
+
+
+def test_the_state_hash_sees_values_not_numpy_scalar_types_and_covers_the_next_entity_id():
+    import numpy as np
+
+    from engine.state import digest, state_hash
+    from engine.world import World
+
+    assert digest({"count": np.int64(7), "x": np.float64(0.5), "on": np.bool_(True)}) == \
+        digest({"count": 7, "x": 0.5, "on": True})
+    assert digest(np.float32(0.1)) == digest(float(np.float32(0.1))) != digest(0.1)
+    a, b = World(1), World(1)
+    assert state_hash(a) == state_hash(b)
+    b.despawn(b.spawn())  # nothing alive in either, but b's next entity gets another id
+    assert state_hash(a) != state_hash(b)
