@@ -84,8 +84,7 @@ def main(width: int = 1280, height: int = 720, warmup: int = 30, frames: int = 6
           f"median (target >= 30 fps; on a shared machine the median is the steadier figure)")
     realtime_loop(app, ctx, frames)
     renderer.timer.enabled, renderer.timer.gpu = True, False  # breakdown: a GL finish after every pass
-    renderer.timer.totals.clear()
-    renderer.timer.frames = 0
+    renderer.timer.reset()
     for _ in range(frames // 2):
         app.step(1)
         app.render_frame()
@@ -94,9 +93,7 @@ def main(width: int = 1280, height: int = 720, warmup: int = 30, frames: int = 6
     # where the main thread blocks: no finish between passes; a pass that samples what queued passes draw
     # waits for the raster threads (llvmpipe), and neither side overlaps the other meanwhile
     renderer.timer.waits = True
-    renderer.timer.totals.clear()
-    renderer.timer.wait_totals.clear()
-    renderer.timer.frames = 0
+    renderer.timer.reset()
     for _ in range(frames // 2):
         app.step(1)
         app.render_frame()

@@ -146,8 +146,7 @@ def bench_render(label: str, width: int, height: int, particles: int, cameras: s
               f"{1e3 * median:6.1f} ms, best {1e3 * min(overlapped):6.1f}; how the engine runs)")
     if passes:
         renderer.timer.enabled, renderer.timer.gpu = True, False
-        renderer.timer.totals.clear()
-        renderer.timer.frames = 0
+        renderer.timer.reset()
         for _ in range(min(frames, 20)):
             step()
             app.render_frame()

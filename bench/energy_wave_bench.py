@@ -177,8 +177,7 @@ def energy_wave_pass_times(width: int, height: int, frames: int) -> str:
         app.step(1)
         app.render_frame()
     renderer.timer.enabled, renderer.timer.gpu = True, False
-    renderer.timer.totals.clear()
-    renderer.timer.frames = 0
+    renderer.timer.reset()
     for _ in range(frames):
         app.step(1)
         app.render_frame()

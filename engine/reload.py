@@ -112,22 +112,23 @@ class HotReloader:
         old_records = list(app.records)
         used: set[int] = set()
 
-        def match(i: int, name: str) -> EntityRecord | None:
-            candidates = ([i] if i < len(old_records) else []) + list(range(len(old_records)))
-            for j in candidates:
-                old = old_records[j]
-                if j not in used and old.name == name and world.alive(old.entity):
-                    used.add(j)
-                    return old
-            return None
+        def live(j: int, name: str | None = None) -> bool:
+            old = old_records[j]
+            return j not in used and (name is None or old.name == name) and world.alive(old.entity)
 
-        matched = [match(i, ent.name) for i, ent in enumerate(plan.entities)]
-        # an entity renamed in place (no other old entity of its name) is replaced by the new one
-        replaced = [None if m is not None or i >= len(old_records) or i in used or not world.alive(old_records[i].entity)
-                    else old_records[i] for i, m in enumerate(matched)]
-        for i, r in enumerate(replaced):
-            if r is not None:
+        matched: list[EntityRecord | None] = []  # by name: the same index first, then the first unused
+        for i, ent in enumerate(plan.entities):
+            order = ([i] if i < len(old_records) else []) + [j for j in range(len(old_records)) if j != i]
+            j = next((j for j in order if live(j, ent.name)), None)
+            if j is not None:
+                used.add(j)
+            matched.append(None if j is None else old_records[j])
+        replaced: list[EntityRecord | None] = []  # an entity renamed in place: the new one replaces the old
+        for i, old in enumerate(matched):
+            take = old is None and i < len(old_records) and live(i)
+            if take:
                 used.add(i)
+            replaced.append(old_records[i] if take else None)
         for i, ent in enumerate(plan.entities):
             old, previous = matched[i], replaced[i]
             if old is None:

@@ -24,9 +24,10 @@ if TYPE_CHECKING:
 
 
 def _feed(h: Any, obj: Any) -> None:
-    if isinstance(obj, (np.bool_, np.integer, np.floating)) and not isinstance(obj, np.longdouble):
-        obj = obj.item()  # a numpy scalar hashes as the Python number of the same value (a count kept as
-        # np.int64 by one code path and int by another is the same state); float32 widens exactly
+    if isinstance(obj, (np.bool_, np.integer, np.floating)):
+        # a numpy scalar hashes as the Python number of the same value: a count kept as np.int64 by one code
+        # path and as int by another is the same state (float32 widens exactly; longdouble stays itself)
+        obj = obj.item()
     if obj is None or isinstance(obj, (bool, str)):
         h.update(f"{type(obj).__name__}:{obj!s}|".encode())
     elif isinstance(obj, Enum):

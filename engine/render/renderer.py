@@ -68,8 +68,8 @@ def gl_flush() -> None:
 
 def _thread_busy_ns() -> int:
     """This thread's CPU time plus the time it waited runnable for a core (Linux ``schedstat``), in ns: wall
-    time minus this is the time it was blocked, not counting other threads holding the cores.  The CPU time
-    alone elsewhere."""
+    time minus this is the time it was blocked, not counting other threads holding the cores.  Where there is no
+    ``schedstat``, the CPU time alone."""
     try:
         with open("/proc/thread-self/schedstat", "rb") as f:
             run, queued = f.read().split()[:2]
@@ -83,9 +83,9 @@ class PassTimer:
 
     With ``waits`` on (and ``gpu`` off) no pass is followed by a finish: each pass's wall time and the main
     thread's busy time during it (CPU plus waiting runnable for a core) are recorded, and their difference
-    (:attr:`wait_totals`) is the time the main thread spent blocked in the driver.  On llvmpipe that is where a pass reads what queued passes draw (a
-    sampled render target, a memory barrier): the raster threads must finish first, so these waits show where
-    the frame's main thread and raster threads stop overlapping."""
+    (:attr:`wait_totals`) is the time the main thread spent blocked in the driver.  On llvmpipe that is where
+    a pass reads what queued passes draw (a sampled render target, a memory barrier): the raster threads must
+    finish first, so these waits show where the frame's main thread and raster threads stop overlapping."""
 
     def __init__(self, ctx: moderngl.Context) -> None:
         self.ctx = ctx
@@ -95,6 +95,12 @@ class PassTimer:
         self.last: dict[str, float] = {}  # pass -> milliseconds (last frame)
         self.totals: dict[str, float] = {}
         self.wait_totals: dict[str, float] = {}  # pass -> milliseconds blocked (``waits`` mode)
+        self.frames = 0
+
+    def reset(self) -> None:
+        """Forget the figures gathered so far (a benchmark's next measurement starts here)."""
+        self.totals.clear()
+        self.wait_totals.clear()
         self.frames = 0
 
     def wrap(self, name: str, execute: Callable[[Any], None]) -> Callable[[Any], None]:
