@@ -14,6 +14,7 @@ from typing import Literal, get_args
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from engine.exact import dot
 from engine.heightfield import HeightField
 from engine.jit import kernel
 from engine.spatial import Transform, quat_conjugate, quat_is_identity, quat_rotate
@@ -196,7 +197,7 @@ class Collider:
         if self.shape == "sphere":
             return np.linalg.norm(p, axis=-1) - self._sphere_radius(transform)
         if self.shape == "plane":
-            return p @ self.normal - self.offset
+            return dot(p, self.normal) - self.offset
         return p[:, 1] - self.heightfield.height_at(p[:, 0], p[:, 2])
 
     def _local_normal(self, p: F64, transform: Transform) -> F64:
@@ -263,8 +264,8 @@ class Collider:
         return hit, t, _unit(o + t[:, None] * d, _UP)
 
     def _ray_plane(self, o: F64, d: F64, transform: Transform, max_t: float) -> RayHits:
-        height = o @ self.normal - self.offset
-        approach = d @ self.normal
+        height = dot(o, self.normal) - self.offset
+        approach = dot(d, self.normal)
         with np.errstate(divide="ignore", invalid="ignore"):
             t = -height / np.where(approach < 0.0, approach, -1.0)
         hit = (approach < 0.0) & (height >= 0.0) & (t <= max_t)

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from engine.app import App
+from engine.exact import matmul, matvec
 from engine.input import InputEvent, InputQueue
 from engine.render.components import Camera, camera_matrices, window_size
 from engine.script import Scripts
@@ -171,7 +172,7 @@ class AutoPilot:
         view, proj, (x, y, pw, ph) = camera_matrices(world.get(camera_entity, Camera),
                                                       world.get(camera_entity, Transform),
                                                       self.window or window_size(world))
-        clip = proj @ view @ np.array([point[0], point[1], point[2], 1.0])
+        clip = matvec(matmul(proj, view), [point[0], point[1], point[2], 1.0])
         ndc = clip[:3] / clip[3]
         if np.any(np.abs(ndc[:2]) > 0.98):
             return None

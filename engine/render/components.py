@@ -17,6 +17,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from engine.config import Color3, ConfigModel, Vec3, Vec4
+from engine.exact import length, matvec, vecmat
 from engine.input import InputState
 from engine.spatial import Transform, cross, quat_from_euler, quat_rotate
 from engine.world import World
@@ -185,20 +186,20 @@ def view_matrix(t: Transform) -> np.ndarray:
     r = t.rotation_matrix()
     m = np.eye(4)
     m[:3, :3] = r.T
-    m[:3, 3] = -r.T @ t.position
+    m[:3, 3] = -vecmat(t.position, r)
     return m
 
 
 def look_at(eye, target, up=(0.0, 1.0, 0.0)) -> np.ndarray:
     eye, target, up = (np.asarray(v, float) for v in (eye, target, up))
     f = target - eye
-    f /= np.linalg.norm(f)
+    f /= length(f)
     s = cross(f, up)
-    s /= np.linalg.norm(s)
+    s /= length(s)
     u = cross(s, f)
     m = np.eye(4)
     m[0, :3], m[1, :3], m[2, :3] = s, u, -f
-    m[:3, 3] = -m[:3, :3] @ eye
+    m[:3, 3] = -matvec(m[:3, :3], eye)
     return m
 
 

@@ -15,6 +15,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from engine.exact import inverse, matmul, matvec
+
 __all__ = ["viewport_pixels", "screen_to_ndc", "screen_ray", "intersect_plane", "pick_ground",
            "camera_matrices"]
 
@@ -43,11 +45,11 @@ def screen_ray(view: ArrayLike, proj: ArrayLike, ndc: ArrayLike) -> tuple[F64, F
 
     Unprojects (x, y, -1) and (x, y, 1) with (proj · view)⁻¹; works for perspective and orthographic cameras.
     """
-    inv = np.linalg.inv(np.asarray(proj, dtype=np.float64) @ np.asarray(view, dtype=np.float64))
+    inv = inverse(matmul(proj, view))
     ndc = np.atleast_2d(np.asarray(ndc, dtype=np.float64))
     n = len(ndc)
-    near = np.column_stack([ndc, -np.ones(n), np.ones(n)]) @ inv.T
-    far = np.column_stack([ndc, np.ones(n), np.ones(n)]) @ inv.T
+    near = matvec(inv, np.column_stack([ndc, -np.ones(n), np.ones(n)]))
+    far = matvec(inv, np.column_stack([ndc, np.ones(n), np.ones(n)]))
     near = near[:, :3] / near[:, 3:]
     far = far[:, :3] / far[:, 3:]
     d = far - near

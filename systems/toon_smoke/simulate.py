@@ -26,6 +26,7 @@ import numpy as np
 
 from components.toon_smoke import SourceState, ToonSmokeState, ToonSmokeVolumeConfig
 from engine.collider import Collider
+from engine.exact import dot
 from engine.spatial import Transform, quat_conjugate, quat_rotate
 from engine.world import World
 from systems.toon_smoke import fluid, poisson
@@ -100,18 +101,18 @@ def _overlapping_colliders(world: World, entity: int, transform: Transform, cfg:
     if not cfg.collide_with_colliders:
         return []
     extent = np.asarray(cfg.extent, float)
-    reach = 0.5 * math.sqrt(extent.dot(extent))
+    reach = 0.5 * math.sqrt(dot(extent, extent))
     found = []
     for other, (t, collider) in world.query(Transform, Collider):
         if other == entity or collider.is_trigger:
             continue
         d = t.position - transform.position
-        gap = math.sqrt(d.dot(d)) - reach
+        gap = math.sqrt(dot(d, d)) - reach
         if collider.shape == "sphere" and gap > collider.radius * float(np.max(np.abs(t.scale))):
             continue
         if collider.shape == "box":
             e = collider.half_extents * t.scale
-            if gap > math.sqrt(e.dot(e)):
+            if gap > math.sqrt(dot(e, e)):
                 continue
         if collider.shape == "heightfield":
             top = t.position[1] + float(collider.heightfield.heights.max())

@@ -17,6 +17,7 @@ from pydantic import Field
 
 from components.water_surface import RigidBody, RigidBodyState, WaterState
 from engine.config import ConfigModel, Vec3
+from engine.exact import length
 from engine.registry import RegistryError
 from engine.script import Script, script
 from engine.spatial import Transform, cross
@@ -107,7 +108,7 @@ class Glide(Script):
         t = self.ctx.get(Transform)
         step = np.array(self.params.velocity) * (self.direction * dt)
         t.position = t.position + step
-        self.travelled += float(np.linalg.norm(step))
+        self.travelled += float(length(step))
         if self.params.distance > 0.0 and self.travelled >= self.params.distance:
             self.direction, self.travelled = -self.direction, 0.0
 
@@ -133,7 +134,7 @@ class Tow(Script):
         error = target - state.velocity
         error[1] = 0.0
         self.ctx.call("rigid_body.apply_force", force=mass * self.params.response * error)
-        self.travelled += float(np.linalg.norm(state.velocity[[0, 2]])) * dt
+        self.travelled += float(length(state.velocity[[0, 2]])) * dt
         if self.params.distance > 0.0 and self.travelled >= self.params.distance:
             self.direction, self.travelled = -self.direction, 0.0
 

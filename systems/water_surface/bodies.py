@@ -23,7 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from engine.spatial import cross
+from engine.exact import matmul, matvec, vecmat
+from engine.spatial import cross, quat_mul
 from systems.water_surface.geometry import BOX, F64, SPHERE, Grid, all_of, bilinear_slope_pair, max_of, sum_of
 
 __all__ = ["BodyArrays", "apply_impulses", "inertia", "integrate", "pool_contacts", "water_forces"]
@@ -34,29 +35,27 @@ _MAX_SUBSTEPS = 8
 _OMEGA_DT = 0.3
 
 
-def _quaternion_products() -> F64:
-    """(16, 9): the rotation matrix of a unit quaternion q = (w, x, y, z), minus the identity, as a linear map of
-    the products q_a·q_b (flattened a·4 + b): R − I = 2·[[−yy − zz, xy − wz, xz + wy], [xy + wz, −xx − zz,
-    yz − wx], [xz − wy, yz + wx, −xx − yy]]."""
-    w, x, y, z = range(4)
-    terms = [[(-1, y, y), (-1, z, z)], [(1, x, y), (-1, w, z)], [(1, x, z), (1, w, y)],
-             [(1, x, y), (1, w, z)], [(-1, x, x), (-1, z, z)], [(1, y, z), (-1, w, x)],
-             [(1, x, z), (-1, w, y)], [(1, y, z), (1, w, x)], [(-1, x, x), (-1, y, y)]]
-    table = np.zeros((16, 9))
-    for entry, products in enumerate(terms):
-        for sign, a, b in products:
-            table[4 * a + b, entry] = 2.0 * sign
-    return table
-
-
-_QUATERNION_PRODUCTS = _quaternion_products()
+# R − I of a unit quaternion q = (w, x, y, z): 2·[[−yy − zz, xy − wz, xz + wy], [xy + wz, −xx − zz, yz − wx],
+# [xz − wy, yz + wx, −xx − yy]]; per entry two products q_a·q_b (flattened a·4 + b) and their factors ±2.
+_W, _X, _Y, _Z = range(4)
+_QUAT_TERMS = [[(-1, _Y, _Y), (-1, _Z, _Z)], [(1, _X, _Y), (-1, _W, _Z)], [(1, _X, _Z), (1, _W, _Y)],
+               [(1, _X, _Y), (1, _W, _Z)], [(-1, _X, _X), (-1, _Z, _Z)], [(1, _Y, _Z), (-1, _W, _X)],
+               [(1, _X, _Z), (-1, _W, _Y)], [(1, _Y, _Z), (1, _W, _X)], [(-1, _X, _X), (-1, _Y, _Y)]]
+_FIRST = np.array([4 * a + b for (_, a, b), _ in _QUAT_TERMS])
+_SECOND = np.array([4 * a + b for _, (_, a, b) in _QUAT_TERMS])
+_FIRST_SIGN = np.array([2.0 * sign for (sign, _, _), _ in _QUAT_TERMS])
+_SECOND_SIGN = np.array([2.0 * sign for _, (sign, _, _) in _QUAT_TERMS])
 _IDENTITY9 = np.eye(3).ravel()
 
 
 def quat_to_matrix(q: F64) -> F64:
-    """Rotation matrices (B, 3, 3) of unit quaternions (B, 4) (w, x, y, z); same as engine.spatial's, for many."""
+    """Rotation matrices (B, 3, 3) of unit quaternions (B, 4) (w, x, y, z); same as engine.spatial's, for many.
+
+    Each entry is (±2·q_a·q_b + ±2·q_c·q_d) + δ, element-wise (no BLAS, see engine.exact), the bits that
+    kernels.wave_bodies computes for the water's outline."""
     products = (q[:, :, None] * q[:, None, :]).reshape(len(q), 16)
-    return (products @ _QUATERNION_PRODUCTS + _IDENTITY9).reshape(len(q), 3, 3)
+    return ((products[:, _FIRST] * _FIRST_SIGN + products[:, _SECOND] * _SECOND_SIGN) + _IDENTITY9).reshape(
+        len(q), 3, 3)
 
 
 def _lattice(n: int) -> F64:
@@ -122,17 +121,17 @@ def inertia(bodies: BodyArrays) -> F64:
 
 
 def _world_inverse_inertia(rot: F64, moments: F64) -> F64:
-    return (rot / moments[:, None, :]) @ rot.transpose(0, 2, 1)
+    return matmul(rot / moments[:, None, :], rot.transpose(0, 2, 1))
 
 
 def _rotate(rot: F64, v: F64) -> F64:
     """R·v for (B, 3, 3) matrices and (B, 3) vectors."""
-    return (rot @ v[:, :, None])[:, :, 0]
+    return matvec(rot, v)
 
 
 def _unrotate(rot: F64, v: F64) -> F64:
     """Rᵀ·v (world to body frame)."""
-    return (v[:, None, :] @ rot)[:, 0, :]
+    return vecmat(v, rot)
 
 
 def _samples(bodies: BodyArrays, rot: F64) -> tuple[F64, F64, F64]:
@@ -152,7 +151,7 @@ def _samples(bodies: BodyArrays, rot: F64) -> tuple[F64, F64, F64]:
         volume = bodies.volume[:, None] * np.where(box[:, :, 0], _BOX_SHARE, _SPHERE_SHARE)
         thickness_box = sum_of(np.abs(rot[:, 1, :]) * bodies.half, axis=1) * (2.0 / _BOX_N)
         thickness = np.where(is_box, thickness_box, 2.0 * bodies.radius / _SPHERE_N)
-    return rot @ local, volume, thickness
+    return matmul(rot, local), volume, thickness
 
 
 def water_forces(bodies: BodyArrays, rot: F64, heights: F64, previous: F64, dt: float, grid: Grid, density: float,
@@ -193,7 +192,7 @@ def apply_impulses(bodies: BodyArrays, impulse: F64, angular_impulse: F64) -> No
     rot = quat_to_matrix(bodies.rotation)
     bodies.velocity += impulse / bodies.mass[:, None]
     inv = _world_inverse_inertia(rot, inertia(bodies))
-    bodies.spin += np.einsum("bij,bj->bi", inv, angular_impulse)
+    bodies.spin += matvec(inv, angular_impulse)
 
 
 def substeps(bodies: BodyArrays, density: float, dt: float) -> int:
@@ -252,26 +251,8 @@ def integrate(bodies: BodyArrays, dt: float, water: tuple | None, linear_drag: f
 
 
 def _spin_product(spin: F64, q: F64) -> F64:
-    """(0, ω) ⊗ q (Hamilton product; q̇ = ½·(0, ω) ⊗ q) for (B, 3) ω and (B, 4) q, from one table of products."""
-    products = (spin[:, :, None] * q[:, None, :]).reshape(len(q), 12)
-    return products @ _SPIN_PRODUCTS
-
-
-def _spin_products() -> F64:
-    """(12, 4): (0, ω) ⊗ q as a linear map of the products ω_a·q_b (flattened a·4 + b), a ∈ (x, y, z),
-    b ∈ (w, x, y, z)."""
-    x, y, z = range(3)
-    qw, qx, qy, qz = range(4)
-    terms = [[(-1, x, qx), (-1, y, qy), (-1, z, qz)], [(1, x, qw), (1, y, qz), (-1, z, qy)],
-             [(-1, x, qz), (1, y, qw), (1, z, qx)], [(1, x, qy), (-1, y, qx), (1, z, qw)]]
-    table = np.zeros((12, 4))
-    for entry, products in enumerate(terms):
-        for sign, a, b in products:
-            table[4 * a + b, entry] = sign
-    return table
-
-
-_SPIN_PRODUCTS = _spin_products()
+    """(0, ω) ⊗ q (Hamilton product; q̇ = ½·(0, ω) ⊗ q) for (B, 3) ω and (B, 4) q."""
+    return quat_mul(np.concatenate([np.zeros((len(spin), 1)), spin], axis=1), q)
 
 
 def pool_contacts(bodies: BodyArrays, grid: Grid, floor: float, active: np.ndarray) -> None:
@@ -288,7 +269,7 @@ def pool_contacts(bodies: BodyArrays, grid: Grid, floor: float, active: np.ndarr
     x_hi, z_hi = grid.x0 + (grid.nx - 1) * grid.h, grid.z0 + (grid.nz - 1) * grid.h
     offsets = np.array([floor, grid.x0, -x_hi, grid.z0, -z_hi])
     reach = np.where(bodies.shapes == SPHERE, bodies.radius, np.linalg.norm(bodies.half, axis=1))
-    clear = bodies.position @ normals.T - reach[:, None] > offsets  # (B, P): a plane no corner can reach
+    clear = matmul(bodies.position, normals.T) - reach[:, None] > offsets  # (B, P): a plane no corner can reach
     if np.all(clear | ~active[:, None]):
         return
     corners = np.einsum("bij,bcj->bci", rot, _CORNERS[None] * bodies.half[:, None, :])  # (B, 8, 3)
@@ -306,7 +287,7 @@ def pool_contacts(bodies: BodyArrays, grid: Grid, floor: float, active: np.ndarr
     vn = np.sum(vc * n, axis=-1)
     hit = (count > 0) & (vn < 0.0)
     inv = _world_inverse_inertia(rot, inertia(bodies))
-    k = 1.0 / bodies.mass[:, None] + np.sum(cross(np.einsum("bij,bpj->bpi", inv, cross(arm, n)), arm) * n, -1)
+    k = 1.0 / bodies.mass[:, None] + np.sum(cross(matvec(inv[:, None], cross(arm, n)), arm) * n, -1)
     jn = np.where(hit, -(1.0 + bodies.restitution[:, None]) * vn / k, 0.0)
     vt = vc - vn[..., None] * n
     speed = np.linalg.norm(vt, axis=-1)
@@ -314,7 +295,7 @@ def pool_contacts(bodies: BodyArrays, grid: Grid, floor: float, active: np.ndarr
     tangent = vt / np.where(speed > 0.0, speed, 1.0)[..., None]
     impulse = jn[..., None] * n - jt[..., None] * tangent  # (B, P, 3)
     bodies.velocity += impulse.sum(axis=1) / bodies.mass[:, None]
-    bodies.spin += np.einsum("bij,bj->bi", inv, cross(arm, impulse).sum(axis=1))
+    bodies.spin += matvec(inv, cross(arm, impulse).sum(axis=1))
     push = np.max(np.where(touching, depth, 0.0), axis=2)  # (B, P)
     bodies.position = bodies.position + np.einsum("bp,pi->bi", push, normals)
 

@@ -120,7 +120,7 @@ def water_mean(field, solid):
 
 # ------------------------------------------------------------------------------------------------ bodies
 # R − I of a unit quaternion (w, x, y, z) = 2·[[−yy − zz, xy − wz, xz + wy], [xy + wz, −xx − zz, yz − wx],
-# [xz − wy, yz + wx, −xx − yy]] (bodies._quaternion_products): per entry two products q_a·q_b with their signs.
+# [xz − wy, yz + wx, −xx − yy]] (bodies._QUAT_TERMS): per entry two products q_a·q_b with their signs.
 QUAT_TERMS = np.array([[-1, 2, 2, -1, 3, 3], [1, 1, 2, -1, 0, 3], [1, 1, 3, 1, 0, 2],
                         [1, 1, 2, 1, 0, 3], [-1, 1, 1, -1, 3, 3], [1, 2, 3, -1, 0, 1],
                         [1, 1, 3, -1, 0, 2], [1, 2, 3, 1, 0, 1], [-1, 1, 1, -1, 2, 2]], np.int64)
@@ -133,9 +133,7 @@ def wave_bodies(table, radius, terms):
     one buffer holding half extents × |scale| (B, 3), radius × max |scale| (B,), positions (B, 3) and rotation
     matrices (B, 3, 3).
 
-    The matrices are ``bodies.quat_to_matrix``'s bits: it multiplies the products q_a·q_b by a table of ±2 (a BLAS
-    matmul); each entry has two non-zero terms, ±2·q_a·q_b is exact, and a sum of two terms (with exact zeros)
-    is the same whatever the order or fused multiply-adds; adding the identity then turns a −0 into +0 as there.
+    The matrices are ``bodies.quat_to_matrix``'s bits: per entry (±2·q_a·q_b + ±2·q_c·q_d) + δ, in that order.
     """
     n = len(radius)
     out = np.empty(16 * n)
@@ -653,7 +651,7 @@ def edge_table(polygons, counts):
             au, av = polygons[b, k, 0], polygons[b, k, 1]
             eu, ev = polygons[b, nxt, 0] - au, polygons[b, nxt, 1] - av
             length2 = eu * eu + ev * ev
-            length = math.hypot(eu, ev)
+            length = np.hypot(eu, ev)  # C's hypot, as numpy's (Python's math.hypot rounds some pairs otherwise)
             real = valid and length > 0.0
             inv = 1.0 / length if real else 0.0
             nu, nv = ev * (inv * -1.0), eu * (inv * 1.0)
@@ -721,7 +719,7 @@ def outline_impulse(uv, body, before, has_before, after, h, alpha, nb):
             lowered[i] = _inside(before, b, u, v, -ON_OUTLINE)
         else:
             bu, bv = u, v
-        d = math.hypot(u - bu, v - bv) * h  # eq. 2.5
+        d = np.hypot(u - bu, v - bv) * h  # eq. 2.5 (np.hypot: the same bits with NUMBA_DISABLE_JIT=1)
         sign = (1.0 if raised[i] else 0.0) - (1.0 if lowered[i] else 0.0)
         change[i] = alpha * d * sign  # eq. 2.6 / 2.7
         total[b] += change[i]

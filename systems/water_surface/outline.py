@@ -21,6 +21,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from engine.exact import matmul
 from systems.water_surface.geometry import (BOX, EPS_LINE, F64, I64, NUDGE, Bodies, Grid, all_of, any_of, max_of,
                                             min_of, ranges, sum_of)
 
@@ -210,7 +211,7 @@ _CORNERS_T = np.ascontiguousarray(_SIGNS.T)  # (3, 8): the corners coordinate-ma
 
 
 def _box_sections(bodies: Bodies, plane_y: F64, grid: Grid) -> tuple[F64, I64, I64]:
-    corners = bodies.rotation @ (_CORNERS_T * bodies.half[:, :, None]) + bodies.position[:, :, None]  # (B, 3, 8)
+    corners = matmul(bodies.rotation, _CORNERS_T * bodies.half[:, :, None]) + bodies.position[:, :, None]  # (B, 3, 8)
     q, r = corners.take(_EA, axis=2), corners.take(_EB, axis=2)  # (B, 3, 12): the two corners Q, R of each edge
     yq, yr = q[:, 1] - plane_y[:, None], r[:, 1] - plane_y[:, None]
     straddle = (yq >= 0.0) != (yr >= 0.0)

@@ -17,6 +17,7 @@ import numpy as np
 from components.water_surface import (RigidBody, RigidBodyState, WaterState, WaterSurface, check_stability)
 from engine.collider import Collider
 from engine.events import EventReader
+from engine.exact import length
 from engine.impacts import Impact
 from engine.spatial import Transform, cross
 from engine.world import World
@@ -91,7 +92,7 @@ def impacts_system(world: World, dt: float) -> None:
         elif world.has(event.target, WaterState, WaterSurface):
             cfg = world.get(event.target, WaterSurface)
             radius = max(cfg.disturbance_radius, cfg.spacing)
-            volume = float(np.linalg.norm(event.impulse)) / (cfg.water_density * cfg.wave_speed)  # J = ρ·V·c
+            volume = float(length(event.impulse)) / (cfg.water_density * cfg.wave_speed)  # J = ρ·V·c
             add_splash(world, event.target, np.array(event.point, float), volume / (np.pi * radius * radius))
     cursor.cursor = reader.cursor
 

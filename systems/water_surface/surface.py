@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from engine.exact import matmul
 from components.water_surface import WaterState, WaterSurface
 from systems.water_surface import kernels as K
 from systems.water_surface.geometry import F64, I64, Bodies, Grid, all_of, any_of, bilinear, ranges, sum_of
@@ -181,14 +182,13 @@ _CORNERS_T = np.ascontiguousarray(np.array([[sx, sy, sz] for sx in (-1.0, 1.0) f
 
 def _outline_step(state, cfg, grid, bodies, local, levels, plane_y, k, volume, report) -> StepReport | None:
     """The paper's method: added points on the outline make and reflect the waves (one kernel, kernels.py). The
-    boxes' corners are rotated by numpy's matmul (the bits of the numpy step: its BLAS sums with fused
-    multiply-adds)."""
+    boxes' corners are rotated by engine.exact's matmul, as the numpy step does."""
     z, zp = state.heights, state.previous
     n = len(bodies)
     cached = state.section_edges is not None and state.section_edges[0] is state.polygons
     new = zp if zp.flags.c_contiguous and zp.flags.writeable else np.empty_like(z)
     floats, ints, small, state.solid, m, n_seg, n_solid, n_unique, width = K.outline_step(
-        z, zp, k, state.degree, new, np.matmul(bodies.rotation, local), bodies.shapes, bodies.position,
+        z, zp, k, state.degree, new, matmul(bodies.rotation, local), bodies.shapes, bodies.position,
         bodies.radius, plane_y, levels, sphere_ring(cfg.sphere_segments), EDGE_A, EDGE_B, SHARED_FACE, grid.x0,
         grid.z0, grid.h, bodies.entities,
         state.point_keys, state.point_heights, state.point_previous, state.body_entities, state.polygons,

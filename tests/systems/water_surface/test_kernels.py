@@ -112,7 +112,8 @@ def _sections(bodies, grid, segments=12):
     is_box = bodies.shapes == 0
     from systems.water_surface.outline import EDGE_A, EDGE_B, SHARED_FACE, sphere_ring
     from systems.water_surface.surface import _CORNERS_T
-    corners = bodies.rotation @ (_CORNERS_T * bodies.half[:, :, None]) + bodies.position[:, :, None]
+    from engine.exact import matmul
+    corners = matmul(bodies.rotation, _CORNERS_T * bodies.half[:, :, None]) + bodies.position[:, :, None]
     K.box_sections(corners, plane, EDGE_A, EDGE_B, SHARED_FACE, grid.x0, grid.z0, grid.h, polygons, counts, vfeat,
                    efeat, is_box.nonzero()[0])
     K.sphere_sections(bodies.position, bodies.radius, plane, sphere_ring(segments), grid.x0, grid.z0, grid.h,
@@ -156,8 +157,8 @@ def test_outline_kernels_are_the_numpy_functions(name):
 
 
 def test_wave_bodies_matches_numpy_bits():
-    """kernels.wave_bodies (gather_wave_bodies' sizes and matrices) == |scale| products and quat_to_matrix (the
-    BLAS matmul) bit for bit: random, axis-aligned, identity, half-turn and unnormalised quaternions, negative
+    """kernels.wave_bodies (gather_wave_bodies' sizes and matrices) == |scale| products and bodies.quat_to_matrix
+    bit for bit: random, axis-aligned, identity, half-turn and unnormalised quaternions, negative
     and zero scales."""
     from systems.water_surface.bodies import quat_to_matrix
 
