@@ -12,12 +12,16 @@ from dataclasses import dataclass, field
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import AfterValidator, Field, field_validator
+from pydantic import AfterValidator, Field, ValidationInfo, field_validator, model_validator
 
 from engine.config import Color3, ConfigModel, _as_tuple
 from engine.registry import BuildContext
 
-__all__ = ["DustDevilConfig", "DustDevilState", "build_dust_devil"]
+__all__ = ["MAX_PBVR_POINTS", "MAX_POINT_FILL", "MAX_PREWARM_WORK", "DustDevilConfig", "DustDevilState", "build_dust_devil"]
+
+MAX_PBVR_POINTS = 8_000_000  # points a frame (particle_count · sub_particles · repeats): 5000 · 2 · 16 in the paper
+MAX_POINT_FILL = 4 * MAX_PBVR_POINTS  # points · point_size² (pixels rasterised a frame): the cap above at 2 px
+MAX_PREWARM_WORK = 100_000_000  # particle_count · substeps · prewarm steps: 5000 · 1 · 300 in the paper preset
 
 Size3 = Annotated[list[Annotated[float, Field(ge=1.0, le=1000.0)]], Field(min_length=3, max_length=3),
                   AfterValidator(_as_tuple)]
@@ -109,6 +113,34 @@ class DustDevilConfig(ConfigModel):
         if value[0] > value[1]:
             raise ValueError(f"min {value[0]} must not exceed max {value[1]}")
         return value
+
+    @model_validator(mode="after")
+    def _point_budget(self) -> DustDevilConfig:
+        """PBVR draws particle_count · sub_particles · repeats points a frame: each bound alone is sane, all three
+        at their maxima would be 200 million points, minutes a frame on a software rasteriser."""
+        points = self.particle_count * self.sub_particles * self.repeats
+        if self.pbvr and points > MAX_PBVR_POINTS:
+            raise ValueError(f"particle_count * sub_particles * repeats = {points} points a frame exceeds "
+                             f"{MAX_PBVR_POINTS}; lower particle_count, sub_particles or repeats")
+        fill = (points if self.pbvr else self.particle_count) * self.point_size ** 2
+        if fill > MAX_POINT_FILL:
+            raise ValueError(f"{'particle_count * sub_particles * repeats' if self.pbvr else 'particle_count'} * "
+                             f"point_size² = {fill:.4g} pixels a frame exceeds {MAX_POINT_FILL:.4g}; lower "
+                             "point_size or the point count")
+        return self
+
+    @model_validator(mode="after")
+    def _prewarm_budget(self, info: ValidationInfo) -> DustDevilConfig:
+        """The first step runs prewarm_time / fixed_dt steps of particle_count · substeps particles at once: at
+        the smallest fixed_dt and the largest counts that was hours before the first frame."""
+        dt = (info.context or {}).get("fixed_dt") if info is not None else None
+        dt = float(dt) if dt else 1.0 / 60.0
+        work = self.particle_count * self.substeps * round(self.prewarm_time / dt)
+        if work > MAX_PREWARM_WORK:
+            raise ValueError(f"particle_count * substeps * (prewarm_time / fixed_dt = {round(self.prewarm_time / dt)}"
+                             f" steps) = {work} particle steps before the first frame exceeds {MAX_PREWARM_WORK}; "
+                             "lower prewarm_time, particle_count or substeps")
+        return self
 
     @property
     def dragging_repeats(self) -> int:

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from typing import Annotated
 
 import numpy as np
-from pydantic import Field, ValidationInfo, field_validator
+from pydantic import Field, ValidationInfo, field_validator, model_validator
 
 from engine.config import Color3, ConfigModel, Vec3
 
@@ -59,6 +59,7 @@ PATTERN_PARAMETERS: dict[str, dict[str, float | int]] = {
 }
 
 MAX_PARTICLES = 1_000_000
+MAX_SPRITES = 2_000_000  # max_particles · max(trail_textures, splash_samples): 20,000 · 16 by default
 MAX_SUB_SPRITES = 64  # M and N: sub-sprites per particle, expanded on the GPU
 MAX_CONTROL_POINTS = 16
 MAX_KEYFRAMES = 64
@@ -219,6 +220,17 @@ class EnergyWaveEmitter(ConfigModel):
         if points and sum(c.probability for c in points) <= 0.0:
             raise ValueError("at least one control point needs a probability > 0")
         return points
+
+    @model_validator(mode="after")
+    def _sprite_budget(self) -> EnergyWaveEmitter:
+        """Every particle may become a trail of M sprites or a bar of N: the sprite buffers hold max_particles ·
+        max(M, N) billboards. Each bound alone is sane; together at their maxima they were 64 million sprites
+        (gigabytes of index buffer, a minute a frame)."""
+        sprites = self.max_particles * max(self.trail_textures, self.splash_samples)
+        if sprites > MAX_SPRITES:
+            raise ValueError(f"max_particles * max(trail_textures, splash_samples) = {sprites} sprites exceeds "
+                             f"{MAX_SPRITES}; lower max_particles, trail_textures or splash_samples")
+        return self
 
 
 @dataclass(frozen=True)

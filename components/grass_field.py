@@ -14,6 +14,7 @@ This module holds the config a modder writes (:class:`GrassFieldConfig`) and the
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -25,6 +26,7 @@ from engine.config import Color3, ConfigModel, Vec4
 __all__ = ["GrassFieldConfig", "GrassFieldState", "build_grass_field", "MAX_PLANTS"]
 
 MAX_PLANTS = 1 << 20  # grid_x * grid_z * plants_per_cell: sizes the per-plant GPU texture
+MAX_PLANT_DETAIL = 20_000  # the level-0 triangle estimate of one plant (the paper's: 1,280, the meadow's 2,080)
 MAX_DOTS_PER_LINE = 2048  # level-3 dots along one stem or branch (sizes the level-3 mesh)
 
 
@@ -188,6 +190,21 @@ class GrassFieldConfig(ConfigModel):
         if plants > MAX_PLANTS:
             raise ValueError(f"grid_x * grid_z * plants_per_cell = {plants} plants exceeds {MAX_PLANTS}; "
                              "lower grid_x, grid_z or plants_per_cell")
+        return self
+
+    @model_validator(mode="after")
+    def _plant_detail(self) -> GrassFieldConfig:
+        """A level-0 plant has about (branches) · (segments) · (stem_sides + 2 · leaf subdivisions) triangles (the
+        paper's plant: about 1,000). Every shape bound at its maximum made 70,000 a plant, drawn for each near
+        plant every frame."""
+        branches = self.branch_count + self.branch_count_jitter
+        segments = self.branch_segments + self.branch_segments_jitter
+        estimate = branches * segments * (self.stem_sides + 2 * math.ceil(self.leaf_subdivisions[0]))
+        if estimate > MAX_PLANT_DETAIL:
+            raise ValueError(f"(branch_count + jitter) * (branch_segments + jitter) * (stem_sides + 2 * "
+                             f"leaf_subdivisions[0]) = {estimate} exceeds {MAX_PLANT_DETAIL} (about the triangles "
+                             "of one level-0 plant); lower branch_count, branch_segments, stem_sides or "
+                             "leaf_subdivisions")
         return self
 
     @model_validator(mode="after")

@@ -11,6 +11,7 @@ rotation (scale is ignored so that metres stay metres).  Arrays are indexed [x, 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Annotated, Any, Literal
 
@@ -40,6 +41,8 @@ GridSize = Annotated[list[Annotated[int, Field(ge=8, le=128, multiple_of=8)]], F
 DisplaySize = Annotated[list[Annotated[int, Field(ge=8, le=256)]], Field(min_length=3, max_length=3),
                         AfterValidator(_int_tuple)]
 MAX_BLOB_CELLS = 8.0  # longest blob semi-axis, in display cells (bounds the splat stencil)
+MAX_SOLVER_WORK = 64 ** 3 * 128  # simulation cells × (diffusion + pressure iterations) a tick: 32³ × 48 in the paper
+MAX_DISPLAY_CELLS = 128 * 128 * 256  # display (isosurface) cells: 64³ in the paper
 
 
 class SmokeSourceConfig(ConfigModel):
@@ -48,7 +51,7 @@ class SmokeSourceConfig(ConfigModel):
     name: str = Field("source", min_length=1, max_length=64,
                       description="Name scripts use with the 'toon_smoke.set_source' command.")
     position: Vec3 = Field((0.0, -1.5, 0.0), description="Centre in the volume's local frame, metres.")
-    radius: float = Field(0.4, gt=0.0, le=1000.0, description="Radius of the emitting sphere, metres.")
+    radius: float = Field(0.4, ge=0.01, le=1000.0, description="Radius of the emitting sphere, metres.")
     density_rate: float = Field(8.0, ge=0.0, le=1000.0,
                                 description="Density ρ added per second inside the sphere (the source term s of "
                                             "Stam's ∂ρ/∂t = … + s).")
@@ -174,6 +177,15 @@ class ToonSmokeVolumeConfig(ConfigModel):
                              f"{len(self.ramp_colors)}: give one start position per colour")
         if self.ramp_positions[0] != 0.0 or any(b <= a for a, b in zip(self.ramp_positions, self.ramp_positions[1:])):
             raise ValueError(f"ramp_positions {list(self.ramp_positions)} must start at 0 and increase strictly")
+        sim_cells, display_cells = math.prod(sim), math.prod(disp)
+        work = sim_cells * (self.diffusion_iterations + self.pressure_iterations)
+        if work > MAX_SOLVER_WORK:
+            raise ValueError(f"simulation_resolution {list(sim)} × (diffusion_iterations + pressure_iterations) = "
+                             f"{work} cell sweeps a tick exceeds {MAX_SOLVER_WORK}; lower the resolution or the "
+                             "iterations")
+        if display_cells > MAX_DISPLAY_CELLS:
+            raise ValueError(f"display_resolution {list(disp)} has {display_cells} cells, more than "
+                             f"{MAX_DISPLAY_CELLS} (128 × 128 × 256); lower it")
         h_display = cells[0] / factors[0]
         longest = self.blob_radius_max * self.blob_stretch_max / h_display
         if longest > MAX_BLOB_CELLS:

@@ -227,7 +227,7 @@ class RigidBody(ConfigModel):
 
     shape: Literal["box", "sphere"] = Field("box", description="Collision and inertia shape.")
     half_extents: Vec3 = Field((0.5, 0.5, 0.5), description="Box half sizes in local units (× Transform scale).")
-    radius: float = Field(0.5, gt=0.0, le=10000.0, description="Sphere radius in local units (× max scale).")
+    radius: float = Field(0.5, ge=1e-3, le=10000.0, description="Sphere radius in local units (× max scale).")
     mass: float = Field(100.0, gt=0.0, le=1e7, description="Mass in kg (floats when below ρ·volume).")
     linear_damping: float = Field(0.05, ge=0.0, le=100.0, description="Velocity lost per second (air drag).")
     angular_damping: float = Field(0.05, ge=0.0, le=100.0, description="Spin lost per second.")
@@ -240,8 +240,8 @@ class RigidBody(ConfigModel):
 
     @model_validator(mode="after")
     def _sizes(self) -> RigidBody:
-        if self.shape == "box" and (min(self.half_extents) <= 0.0 or max(self.half_extents) > 10000.0):
-            raise ValueError(f"half_extents must be in (0, 10000] for a box, got {list(self.half_extents)}")
+        if self.shape == "box" and (min(self.half_extents) < 1e-3 or max(self.half_extents) > 10000.0):
+            raise ValueError(f"half_extents must be in [0.001, 10000] for a box, got {list(self.half_extents)}")
         return self
 
 

@@ -16,7 +16,7 @@ from engine.collider import Collider
 from typing import Annotated
 
 from engine.config import ConfigModel, Vec3, _as_tuple
-from engine.heightfield import HeightField, inspect_heightmap, load_heightmap_png, midpoint_displacement
+from engine.heightfield import HeightField, load_heightmap_png, midpoint_displacement
 from engine.input import InputQueue, InputState
 from engine.registry import BuildContext, Registry
 from engine.schedule import Stage
@@ -81,7 +81,7 @@ def _build_collider(cfg: ColliderConfig, ctx: BuildContext) -> Collider:
 class TerrainConfig(ConfigModel):
     """A height-field terrain: midpoint displacement (seeded) or a PNG height map; also a collider."""
 
-    size_exponent: int = Field(6, ge=2, le=11, description="Grid is 2^n + 1 points per side (midpoint displacement).")
+    size_exponent: int = Field(6, ge=2, le=10, description="Grid is 2^n + 1 points per side (midpoint displacement).")
     spacing: float = Field(2.0, gt=0.0, le=1000.0, description="Distance between grid points in metres.")
     roughness: float = Field(0.55, gt=0.0, le=1.0, description="Amplitude ratio per subdivision level (H).")
     amplitude: float = Field(8.0, ge=0.0, le=1000.0, description="Initial random displacement in metres.")
@@ -100,8 +100,9 @@ class TerrainConfig(ConfigModel):
     @field_validator("heightmap")
     @classmethod
     def _heightmap_file(cls, value: str | None, info: ValidationInfo) -> str | None:
-        """The PNG must lie inside the configs root and be a grayscale image of a sane size; checked when the
-        file is validated (the loaders pass ``configs_root`` as validation context) rather than at spawn."""
+        """The PNG must lie inside the configs root and be a whole, readable grayscale image of a sane size;
+        checked when the file is validated (the loaders pass ``configs_root`` as validation context) rather than
+        at spawn."""
         if value is None:
             return value
         from engine.config import resolve_inside
@@ -113,7 +114,7 @@ class TerrainConfig(ConfigModel):
             return value
         path = resolve_inside(root, value)  # ValueError names the escape
         try:
-            inspect_heightmap(path)
+            load_heightmap_png(path)  # decoded, as the spawn will: a truncated file fails here, not at spawn
         except FileNotFoundError:
             raise ValueError(f"height map not found: {path}") from None
         if path.suffix.lower() != ".png":

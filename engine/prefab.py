@@ -98,8 +98,8 @@ class PrefabLibrary:
             transform.position = np.asarray(position, float).copy()
         if plan.scripts:
             slots = []
-            for cls, params, enabled in plan.scripts:
-                slot = make_slot(world, entity, cls, params)
+            for j, (cls, params, enabled) in enumerate(plan.scripts):
+                slot = make_slot(world, entity, cls, params, f"{file}: scripts[{j}]")
                 slot.enabled = enabled
                 slots.append(slot)
             built.append(Scripts(slots))

@@ -150,7 +150,7 @@ class HotReloader:
             records.append(old)
             try:
                 changes += self._apply_components(plan, i, old, ent)
-                changes += self._apply_scripts(old, ent)
+                changes += self._apply_scripts(old, ent, f"{plan.file}: entities[{i}].scripts")
             except Exception as exc:  # noqa: BLE001 - a plugin's hook failing keeps this entity as it was
                 log.error("reload of %s: entities[%d] '%s' failed", plan.file, i, ent.name, exc_info=exc)
                 self.status.errors.append(f"{plan.file}: entities[{i}] '{ent.name}': update failed: "
@@ -218,7 +218,7 @@ class HotReloader:
             spec.live_update(old_cfg, cfg, world, entity)
         return True
 
-    def _apply_scripts(self, record: EntityRecord, ent) -> list[str]:
+    def _apply_scripts(self, record: EntityRecord, ent, key: str) -> list[str]:
         world = self.app.world
         scripts = world.try_get(record.entity, Scripts)
         slots = scripts.slots if scripts else []
@@ -230,7 +230,8 @@ class HotReloader:
                     slot.script.params = params
                     changes.append(f"{record.name}: script '{slot.name}' parameters updated")
             return changes
-        new_slots = [make_slot(world, record.entity, cls, params) for cls, params, _ in wanted]
+        new_slots = [make_slot(world, record.entity, cls, params, f"{key}[{j}]")
+                     for j, (cls, params, _) in enumerate(wanted)]
         for slot, (_, _, enabled) in zip(new_slots, wanted):
             slot.enabled = enabled
         if scripts is not None:

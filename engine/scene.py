@@ -313,7 +313,7 @@ def spawn_entity(world: World, registry: Registry, plan: ScenePlan, index: int, 
     slots = []
     for j, (cls, params, enabled) in enumerate(ent.scripts or ()):
         try:  # a script's constructor raising is the scene's error, like a component that cannot be built
-            slot = make_slot(world, entity, cls, params)
+            slot = make_slot(world, entity, cls, params, f"{plan.file}: entities[{index}].scripts[{j}]")
         except Exception as exc:
             problems.append(build_problem(plan.file, f"entities[{index}].scripts[{j}]", exc))
             continue

@@ -146,6 +146,7 @@ class ScriptSlot:
     enabled: bool = True
     started: bool = False
     readers: list[EventReader] = field(default_factory=list)
+    source: str = ""  # where the slot was declared ("scenes/x.toml: entities[2].scripts[0]"), for error messages
 
     def __hash_state__(self) -> tuple:
         return (self.name, self.enabled, self.started, self.script, [r.cursor for r in self.readers])
@@ -178,11 +179,12 @@ class ScriptRuntime:
         self.failures: list[ScriptFailure] = []
 
 
-def make_slot(world: World, entity: Entity, cls: type[Script], params: ConfigModel) -> ScriptSlot:
+def make_slot(world: World, entity: Entity, cls: type[Script], params: ConfigModel, source: str = "") -> ScriptSlot:
+    """A script instance for ``entity``; ``source`` (file and key of its declaration) goes into its errors."""
     ctx = ScriptContext(world, entity, cls.script_name)
     instance = cls(ctx, params)
     readers = [world.events.reader(t) for t in cls.events]
-    return ScriptSlot(cls.script_name, instance, readers=readers)
+    return ScriptSlot(cls.script_name, instance, readers=readers, source=source)
 
 
 def entity_label(world: World, entity: Entity) -> str:
@@ -204,6 +206,8 @@ def _invoke(world: World, entity: Entity, slot: ScriptSlot, hook: str, *args: An
         runtime.failures.append(failure)
         world.events.send(failure)
         where = f"script '{slot.name}' on {entity_label(world, entity)}"
+        if slot.source:
+            where = f"{slot.source}: {where}"
         if runtime.strict:
             raise ScriptError(f"{where} raised in {hook}: {exc}") from exc
         log.error("%s raised in %s and was disabled:\n%s", where, hook, tb)

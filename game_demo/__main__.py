@@ -64,6 +64,8 @@ def autoplay(app: App, args: argparse.Namespace) -> int:
     from game_demo.scripts.common import GameState
 
     size = tuple(args.size) if args.size else (app.config.render.width, app.config.render.height)
+    if args.size and args.no_render:  # no renderer: the scene's size is the window the pilot and picking use
+        app.config.render = app.config.render.model_copy(update={"width": size[0], "height": size[1]})
     pilot = AutoPilot()  # mouse positions in the engine's window: the renderer's size, or the scene's without one
     app.pre_tick.append(pilot)
     renderer = None

@@ -42,6 +42,9 @@ from systems.grass_field.lod import (N_BAND_SIDES, N_VIEWS, CameraInput, Imposto
                                      camera_from_view)
 from systems.grass_field.simulate import FieldData, ensure_placed
 
+MAX_ATLAS_SIDE = 4096  # texels per side of the cached-image and band atlases (64 MiB of RGBA8 each at most;
+# their tiles shrink to fit): the paper preset needs about 1200, the meadow 2600
+
 __all__ = ["GrassFieldFeature", "FieldGpu", "FieldFrame"]
 
 log = logging.getLogger("grass_field")
@@ -155,7 +158,7 @@ class FieldGpu:
                                 np.radians(cfg.impostor_elevation_deg))
         tw, th = tile_pixels(self.frame, cfg)
         max_size = int(ctx.info.get("GL_MAX_TEXTURE_SIZE", 8192))
-        self.layout: AtlasLayout = atlas_layout(cfg.cell_variants * N_VIEWS, tw, th, min(max_size, 16384))
+        self.layout: AtlasLayout = atlas_layout(cfg.cell_variants * N_VIEWS, tw, th, min(max_size, MAX_ATLAS_SIDE))
         self.atlas: moderngl.Texture | None = None
         self.bounds_tex: moderngl.Texture | None = None
         self.baked_views = 0  # cached views rendered (each view of each layout once, unless loaded from disk)
@@ -450,7 +453,7 @@ class FieldGpu:
             per_unit = camera.width / (2.0 * cfg.merge_distance * camera.tan_half_fov)
         tw = int(np.clip(np.ceil(2.0 * half * per_unit * cfg.band_resolution_scale), 16, 2048))
         th = int(np.clip(np.ceil(tw * height_ratio * 1.25), 8, 512))
-        max_size = min(int(self.ctx.info.get("GL_MAX_TEXTURE_SIZE", 8192)), 16384)
+        max_size = min(int(self.ctx.info.get("GL_MAX_TEXTURE_SIZE", 8192)), MAX_ATLAS_SIDE)
         self.band_layout = atlas_layout(cfg.band_cache_cells * N_BAND_SIDES, tw, th, max_size, pad=1)
         self.band_tex = self.ctx.texture(self.band_layout.size, 4)
         self.band_tex.filter = (moderngl.LINEAR, moderngl.LINEAR)

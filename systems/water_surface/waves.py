@@ -167,13 +167,15 @@ def dents(grid: Grid, centres_uv: F64, heights: F64, radius: float) -> tuple[I64
         return np.zeros(0, np.int64), np.zeros(0)
     r = radius / grid.h
     reach = int(np.ceil(2.0 * r))
+    # each drop's 2·reach square of vertices, clipped to the grid first (a radius of many cells on a small grid
+    # would otherwise list millions of vertices to throw away), row by row in the same order as unclipped
     lo = np.floor(centres_uv).astype(np.int64) - reach + 1
-    side = 2 * reach
-    drop, offset = ranges(np.zeros(len(centres_uv), np.int64), np.full(len(centres_uv), side * side))
-    dv, du = np.divmod(offset, side)
-    i, j = lo[drop, 0] + du, lo[drop, 1] + dv
-    ok = (i >= 0) & (i < grid.nx) & (j >= 0) & (j < grid.nz)
-    drop, i, j = drop[ok], i[ok], j[ok]
+    hi = lo + 2 * reach
+    lo_c, hi_c = np.maximum(lo, 0), np.minimum(hi, (grid.nx, grid.nz))
+    width = np.maximum(hi_c - lo_c, 0)  # (D, 2) columns, rows
+    drop, offset = ranges(np.zeros(len(centres_uv), np.int64), width[:, 0] * width[:, 1])
+    dv, du = np.divmod(offset, np.maximum(width[drop, 0], 1))
+    i, j = lo_c[drop, 0] + du, lo_c[drop, 1] + dv
     r2 = (i - centres_uv[drop, 0]) ** 2 + (j - centres_uv[drop, 1]) ** 2
     change = -heights[drop] * np.exp(-r2 / (r * r))
     flat = j * grid.nx + i

@@ -55,7 +55,7 @@ def test_unknown_key_did_you_mean(tmp_path):
 def test_out_of_range(tmp_path):
     scene = write_scene(tmp_path, '[[entities]]\n[entities.components.Terrain]\nsize_exponent = 30\n')
     (p,) = problems(scene)
-    assert p.key.endswith("size_exponent") and p.value == 30 and "less than or equal to 11" in p.message
+    assert p.key.endswith("size_exponent") and p.value == 30 and "less than or equal to 10" in p.message
 
 
 def test_unknown_component_and_script_are_reported_together(tmp_path):

@@ -31,13 +31,18 @@ REPO = Path(__file__).resolve().parents[2]
 
 # ------------------------------------------------------------------------------------------- helpers
 def configs(tmp_path: Path) -> Path:
-    """An empty configs root with a water preset and two height maps (a good one and a text file)."""
+    """An empty configs root with a water preset and three height maps (a good one, a text file, a truncated
+    PNG)."""
     root = tmp_path / "configs"
     for sub in ("scenes", "prefabs", "assets", "effects/water_surface"):
         (root / sub).mkdir(parents=True)
     (root / "effects" / "water_surface" / "calm.toml").write_text("wave_speed = 1.0\n")
     Image.fromarray(np.full((5, 5), 128, np.uint8), "L").save(root / "assets" / "hills.png")
     (root / "assets" / "notes.png").write_text("not an image\n")
+    noise = np.random.default_rng(0).integers(0, 256, (64, 64), dtype=np.uint8)
+    Image.fromarray(noise, "L").save(root / "assets" / "cut.png")
+    cut = (root / "assets" / "cut.png").read_bytes()
+    (root / "assets" / "cut.png").write_bytes(cut[:len(cut) // 2])  # a valid header, half the pixels
     return root
 
 
@@ -112,6 +117,7 @@ def test_bad_preset_reference(tmp_path, capsys, preset, expected):
 @pytest.mark.parametrize("heightmap, expected", [
     ("assets/missing.png", "height map not found"),
     ("assets/notes.png", "not a readable image"),
+    ("assets/cut.png", "not a readable image"),  # the header reads: validate passed it, the spawn failed
     ("../../outside.png", "escapes the configs root"),
 ])
 def test_bad_heightmap_is_caught_by_validate_with_its_key(tmp_path, capsys, heightmap, expected):
@@ -459,7 +465,8 @@ def test_strict_run_on_the_command_line_reports_without_crashing(tmp_path, capsy
     path = scene(configs(tmp_path), '[[entities]]\nname = "hero"\nscripts = [{ name = "faulty_on_update" }]\n')
     code = main(["run", str(path), "--no-render", "--steps", "3", "--strict"])
     err = capsys.readouterr().err
-    assert code == 1 and "error: script 'faulty_on_update' on entity 1 ('hero') raised in on_update: boom" in err
+    assert code == 1 and (f"error: {path}: entities[0].scripts[0]: script 'faulty_on_update' on entity 1 ('hero') "
+                          "raised in on_update: boom") in err
 
 
 def test_a_replay_header_with_a_bad_tick_count_is_an_error_naming_the_file(tmp_path, capsys):

@@ -159,3 +159,25 @@ def test_render_commands_and_the_window_size_from_scripts(tmp_path):
     ctx.call("render.hud", show_help=True)
     hud = app.world.resource(Hud)
     assert hud.lines == ["a"] and hud.show_fps and hud.show_help
+
+
+def test_a_script_error_names_the_scene_file_and_key(tmp_path, caplog):
+    """A script declared in a scene that raises at run time names where it was declared, so a modder knows which
+    file and entry to fix (it named only the script and the entity id)."""
+    @script("raises")
+    class Raises(Script):
+        def on_update(self, dt):
+            raise ValueError("boom")
+
+    registry = default_registry([])
+    registry.add_script(Raises)
+    path = tmp_path / "configs" / "scenes" / "s.toml"
+    path.parent.mkdir(parents=True)
+    path.write_text('[[entities]]\nname = "a"\n\n[[entities]]\nname = "b"\nscripts = [{ name = "raises" }]\n')
+    app = App(path, registry=registry)
+    app.step(1)
+    assert f"{path}: entities[1].scripts[0]: script 'raises' on entity 2 ('b') raised in on_update" in caplog.text
+    strict = App(path, registry=registry, strict=True)
+    with pytest.raises(ScriptError, match=r"entities\[1\]\.scripts\[0\]: script 'raises' on entity 2 \('b'\) "
+                                          r"raised in on_update: boom"):
+        strict.step(1)

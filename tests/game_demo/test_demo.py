@@ -35,8 +35,9 @@ def test_demo_scene_and_its_presets_validate():
 def test_autoplay_wins_with_the_same_hash_in_two_processes(tmp_path):
     """The issue's command, ``python -m game_demo --headless --autoplay --seed S`` (screenshots of the run), and the
     same run without rendering, in two processes: both win and print the same state hash last (rendering reads
-    the world only, and the autoplay's mouse works in the same window size)."""
-    base = [sys.executable, "-m", "game_demo", "--autoplay", "--seed", "42", "--max-seconds", "90"]
+    the world only, and the autoplay's mouse works in the same window size: ``--size`` sets it for both)."""
+    base = [sys.executable, "-m", "game_demo", "--autoplay", "--seed", "42", "--max-seconds", "90",
+            "--size", "640", "360"]
     cmds = [base + ["--headless", "--screenshots", str(tmp_path / "shots")], base + ["--no-render"]]
     procs = [subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
              for cmd in cmds]

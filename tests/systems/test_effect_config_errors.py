@@ -32,10 +32,10 @@ CASES = [
     ("WaterSurface", "wave_speed = 100.0", "", None, "stability limit"),
     ("RigidBody", "mass = 0.0", "mass", 0.0, "greater than 0"),
     ("RigidBody", "velocity = [1e9, 0.0, 0.0]", "velocity[0]", 1e9, "less than or equal to 1000000"),
-    ("RigidBody", 'shape = "box"\nhalf_extents = [0.0, 1.0, 1.0]', "", None, "half_extents must be in (0, 10000]"),
+    ("RigidBody", 'shape = "box"\nhalf_extents = [0.0, 1.0, 1.0]', "", None, "half_extents must be in [0.001, 10000]"),
     ("DustDevil", "particle_count = 10000000", "particle_count", 10000000, "less than or equal to 200000"),
     ("DustDevil", "grid_resolution = [2, 32, 32]", "grid_resolution[0]", 2, "greater than or equal to 4"),
-    ("Terrain", "size_exponent = 40", "size_exponent", 40, "less than or equal to 11"),
+    ("Terrain", "size_exponent = 40", "size_exponent", 40, "less than or equal to 10"),
     ("Terrain", "spacing = 0.0", "spacing", 0.0, "greater than 0"),
     ("Terrain", "colors = [[inf, 0.0, 0.0], [0.0, 0.0, 0.0]]", "colors[0][0]", math.inf, "finite number"),
     ("Camera", "fov = 500.0", "fov", 500.0, "less than or equal to 150"),
@@ -45,6 +45,23 @@ CASES = [
     ("Collider", "radius = -1.0", "radius", -1.0, "greater than 0"),
     ("Collider", "half_extents = [-1.0, 1.0, 1.0]", "half_extents[0]", -1.0, "greater than or equal to 0"),
     ("Collider", "normal = [0.0, 0.0, 0.0]", "normal", [0.0, 0.0, 0.0], "non-zero direction"),
+    # joint budgets and sizes that passed validation and then crashed, hung or took gigabytes (a fuzzing review)
+    ("EnergyWaveEmitter", "max_particles = 1000000\ntrail_textures = 64", "", None,
+     "max_particles * max(trail_textures, splash_samples) = 64000000 sprites exceeds 2000000"),
+    ("GrassField", "branch_count = 32\nbranch_segments = 24\nstem_sides = 32", "", None,
+     "exceeds 20000 (about the triangles"),
+    ("ToonSmokeVolume", "simulation_resolution = [64, 64, 64]\ndisplay_resolution = [256, 256, 256]\n"
+                        "extent = [4.0, 4.0, 4.0]", "", None, "more than 4194304"),
+    ("ToonSmokeVolume", "simulation_resolution = [128, 128, 128]\ndisplay_resolution = [128, 128, 128]\n"
+                        "pressure_iterations = 500", "", None, "cell sweeps a tick exceeds 33554432"),
+    ("ToonSmokeVolume", 'sources = [{ name = "s", radius = 1e-200 }]', "sources[0].radius", 1e-200,
+     "greater than or equal to 0.01"),
+    ("RigidBody", 'shape = "sphere"\nradius = 1e-300', "radius", 1e-300, "greater than or equal to 0.001"),
+    ("RigidBody", 'shape = "box"\nhalf_extents = [1e-300, 1e-300, 1e-300]', "", None, "[0.001, 10000]"),
+    ("DustDevil", "particle_count = 200000\nsub_particles = 2\nrepeats = 20\npoint_size = 32.0", "", None,
+     "pixels a frame exceeds"),
+    ("DustDevil", "particle_count = 200000\nsubsteps = 8\nprewarm_time = 60.0", "", None,
+     "particle steps before the first frame exceeds 100000000"),
 ]
 
 

@@ -60,6 +60,19 @@ def test_out_of_range_names_the_key():
     assert "particle_count" in _error({"particle_count": 10_000_000})
 
 
+def test_the_pbvr_point_budget_is_enforced():
+    """Each of particle_count, sub_particles and repeats is in range alone; together they may not ask for more than
+    MAX_PBVR_POINTS points a frame (all three at their maxima: 204.8 million). Without PBVR only the real
+    particles are drawn, so the product does not matter."""
+    from components.dust_devil import MAX_PBVR_POINTS
+
+    text = _error({"particle_count": 200_000, "sub_particles": 16, "repeats": 64})
+    assert "particle_count * sub_particles * repeats = 204800000" in text and str(MAX_PBVR_POINTS) in text
+    assert "devil.toml" in text
+    DustDevilConfig(particle_count=200_000, sub_particles=16, repeats=64, pbvr=False)
+    DustDevilConfig(particle_count=200_000, sub_particles=2, repeats=16)  # 6.4 million: allowed
+
+
 def test_unknown_key_suggests_the_near_miss():
     text = _error({"sub_particle": 2})
     assert "unknown key 'sub_particle'" in text and "did you mean 'sub_particles'" in text

@@ -132,3 +132,39 @@ def test_the_2d_stability_limit_is_where_the_scheme_blows_up(courant, stable):
             z, zp = propagate(z, zp, courant ** 2, 2.0 - courant ** 2 * degree, degree)[0], z
     grew = np.abs(z).max() / 1e-3
     assert (grew < 10.0) if stable else not (grew < 1e3)  # NaN after an overflow counts as blown up
+
+
+def _dents_unclipped(grid, centres_uv, heights, radius):
+    """dents as it was: each drop's whole 2·reach square listed, then the vertices off the grid dropped."""
+    from systems.water_surface.geometry import ranges
+
+    r = radius / grid.h
+    reach = int(np.ceil(2.0 * r))
+    lo = np.floor(centres_uv).astype(np.int64) - reach + 1
+    side = 2 * reach
+    drop, offset = ranges(np.zeros(len(centres_uv), np.int64), np.full(len(centres_uv), side * side))
+    dv, du = np.divmod(offset, side)
+    i, j = lo[drop, 0] + du, lo[drop, 1] + dv
+    ok = (i >= 0) & (i < grid.nx) & (j >= 0) & (j < grid.nz)
+    drop, i, j = drop[ok], i[ok], j[ok]
+    change = -heights[drop] * np.exp(-((i - centres_uv[drop, 0]) ** 2 + (j - centres_uv[drop, 1]) ** 2) / (r * r))
+    touched, inverse = np.unique(j * grid.nx + i, return_inverse=True)
+    return touched, np.bincount(inverse, change, len(touched))
+
+
+def test_dents_are_clipped_to_the_grid_before_they_are_listed():
+    """Drops inside, on the edge and off the grid give the same bits as listing each drop's whole square; a radius
+    of thousands of cells on a small grid lists only the grid's vertices (it allocated gigabytes, a fuzzing
+    review found: disturbance_radius 20 m at spacing 0.01 m)."""
+    from systems.water_surface.waves import dents
+
+    grid = make_grid(12, 0.5)
+    rng = np.random.default_rng(4)
+    centres = np.concatenate([rng.uniform(-3.0, 15.0, (40, 2)), [[0.0, 0.0], [11.0, 11.0], [-2.5, 5.0]]])
+    heights = rng.uniform(0.01, 0.2, len(centres))
+    for radius in (0.3, 0.5, 1.7, 4.0):
+        got, want = dents(grid, centres, heights, radius), _dents_unclipped(grid, centres, heights, radius)
+        assert got[0].tobytes() == want[0].tobytes() and got[1].tobytes() == want[1].tobytes()
+    touched, change = dents(grid, centres[:2], heights[:2], 5000.0)  # 20,000 cells of reach: 1.6e9 listed before
+    np.testing.assert_array_equal(touched, np.arange(144))
+    np.testing.assert_allclose(change, -heights[:2].sum(), rtol=1e-5)  # exp(−r²/R²) ≈ 1 over the grid
