@@ -17,7 +17,8 @@ from pydantic import AfterValidator, Field, ValidationInfo, field_validator, mod
 from engine.config import Color3, ConfigModel, _as_tuple
 from engine.registry import BuildContext
 
-__all__ = ["MAX_PBVR_POINTS", "MAX_POINT_FILL", "MAX_PREWARM_WORK", "DustDevilConfig", "DustDevilState", "build_dust_devil"]
+__all__ = ["MAX_PBVR_POINTS", "MAX_POINT_FILL", "MAX_PREWARM_WORK", "DustDevilConfig", "DustDevilState",
+           "build_dust_devil"]
 
 MAX_PBVR_POINTS = 8_000_000  # points a frame (particle_count · sub_particles · repeats): 5000 · 2 · 16 in the paper
 MAX_POINT_FILL = 4 * MAX_PBVR_POINTS  # points · point_size² (pixels rasterised a frame): the cap above at 2 px

@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 from components.energy_wave import (BEAM, FRAME, PATTERNS, ROUND_THRESHOLD, EnergyWaveEmitter, EnergyWaveHit,
                                     EnergyWaveState, ParticleBuffer)
 from engine.collider import Collider
-from engine.exact import dot, matvec
+from engine.exact import length, matvec
 from engine.impacts import Impact
 from engine.noise import PerlinNoise
 from engine.spatial import Transform, quat_is_identity, quat_rotate, quat_to_matrix
@@ -602,7 +602,7 @@ def _send_events(world: World, emitter: int, colliders: list[ColliderEntry], whi
         count = len(p)
         mean_point = np.add.reduce(p, axis=0) / count  # what p.mean(axis=0) computes, without its wrapper
         mean_normal = np.add.reduce(n, axis=0)
-        mean_normal = mean_normal / max(math.sqrt(dot(mean_normal, mean_normal)), _EPS)  # np.linalg.norm's sum
+        mean_normal = mean_normal / max(float(length(mean_normal)), _EPS)
         impulse = mass * np.add.reduce(v, axis=0)
         energy = 0.5 * mass * float(np.einsum("ij,ij->", v, v))
         target = colliders[int(index)].entity

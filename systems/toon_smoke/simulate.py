@@ -18,7 +18,6 @@ instead of three times, and the picture is the same: it shows the state after th
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -26,7 +25,7 @@ import numpy as np
 
 from components.toon_smoke import SourceState, ToonSmokeState, ToonSmokeVolumeConfig
 from engine.collider import Collider
-from engine.exact import dot
+from engine.exact import length
 from engine.spatial import Transform, quat_conjugate, quat_rotate
 from engine.world import World
 from systems.toon_smoke import fluid, poisson
@@ -97,22 +96,22 @@ def update_obstacles(world: World | None, entity: int, transform: Transform, cfg
 def _overlapping_colliders(world: World, entity: int, transform: Transform, cfg: ToonSmokeVolumeConfig) -> list:
     """Colliders that may reach into the volume (a cheap bounding test per collider entity, every step).
 
-    Lengths are ``sqrt(d·d)``, exactly what ``np.linalg.norm`` computes for a vector, without its wrapper's cost."""
+    Lengths are engine.exact's ``length`` (√(d·d) summed in order, the same bits on every CPU)."""
     if not cfg.collide_with_colliders:
         return []
     extent = np.asarray(cfg.extent, float)
-    reach = 0.5 * math.sqrt(dot(extent, extent))
+    reach = 0.5 * float(length(extent))
     found = []
     for other, (t, collider) in world.query(Transform, Collider):
         if other == entity or collider.is_trigger:
             continue
         d = t.position - transform.position
-        gap = math.sqrt(dot(d, d)) - reach
+        gap = float(length(d)) - reach
         if collider.shape == "sphere" and gap > collider.radius * float(np.max(np.abs(t.scale))):
             continue
         if collider.shape == "box":
             e = collider.half_extents * t.scale
-            if gap > math.sqrt(dot(e, e)):
+            if gap > float(length(e)):
                 continue
         if collider.shape == "heightfield":
             top = t.position[1] + float(collider.heightfield.heights.max())

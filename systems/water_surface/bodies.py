@@ -25,6 +25,7 @@ import numpy as np
 
 from engine.exact import matmul, matvec, vecmat
 from engine.spatial import cross, quat_mul
+from systems.water_surface import kernels as K
 from systems.water_surface.geometry import BOX, F64, SPHERE, Grid, all_of, bilinear_slope_pair, max_of, sum_of
 
 __all__ = ["BodyArrays", "apply_impulses", "inertia", "integrate", "pool_contacts", "water_forces"]
@@ -35,16 +36,9 @@ _MAX_SUBSTEPS = 8
 _OMEGA_DT = 0.3
 
 
-# R − I of a unit quaternion q = (w, x, y, z): 2·[[−yy − zz, xy − wz, xz + wy], [xy + wz, −xx − zz, yz − wx],
-# [xz − wy, yz + wx, −xx − yy]]; per entry two products q_a·q_b (flattened a·4 + b) and their factors ±2.
-_W, _X, _Y, _Z = range(4)
-_QUAT_TERMS = [[(-1, _Y, _Y), (-1, _Z, _Z)], [(1, _X, _Y), (-1, _W, _Z)], [(1, _X, _Z), (1, _W, _Y)],
-               [(1, _X, _Y), (1, _W, _Z)], [(-1, _X, _X), (-1, _Z, _Z)], [(1, _Y, _Z), (-1, _W, _X)],
-               [(1, _X, _Z), (-1, _W, _Y)], [(1, _Y, _Z), (1, _W, _X)], [(-1, _X, _X), (-1, _Y, _Y)]]
-_FIRST = np.array([4 * a + b for (_, a, b), _ in _QUAT_TERMS])
-_SECOND = np.array([4 * a + b for _, (_, a, b) in _QUAT_TERMS])
-_FIRST_SIGN = np.array([2.0 * sign for (sign, _, _), _ in _QUAT_TERMS])
-_SECOND_SIGN = np.array([2.0 * sign for _, (sign, _, _) in _QUAT_TERMS])
+# kernels.QUAT_TERMS: per entry of R − I, two products q_a·q_b (flattened a·4 + b) and their factors ±2
+_FIRST, _SECOND = 4 * K.QUAT_TERMS[:, 1] + K.QUAT_TERMS[:, 2], 4 * K.QUAT_TERMS[:, 4] + K.QUAT_TERMS[:, 5]
+_FIRST_SIGN, _SECOND_SIGN = 2.0 * K.QUAT_TERMS[:, 0], 2.0 * K.QUAT_TERMS[:, 3]
 _IDENTITY9 = np.eye(3).ravel()
 
 

@@ -120,7 +120,7 @@ def water_mean(field, solid):
 
 # ------------------------------------------------------------------------------------------------ bodies
 # R − I of a unit quaternion (w, x, y, z) = 2·[[−yy − zz, xy − wz, xz + wy], [xy + wz, −xx − zz, yz − wx],
-# [xz − wy, yz + wx, −xx − yy]] (bodies._QUAT_TERMS): per entry two products q_a·q_b with their signs.
+# [xz − wy, yz + wx, −xx − yy]]: per entry two products q_a·q_b with their signs (also bodies.quat_to_matrix).
 QUAT_TERMS = np.array([[-1, 2, 2, -1, 3, 3], [1, 1, 2, -1, 0, 3], [1, 1, 3, 1, 0, 2],
                         [1, 1, 2, 1, 0, 3], [-1, 1, 1, -1, 3, 3], [1, 2, 3, -1, 0, 1],
                         [1, 1, 3, -1, 0, 2], [1, 2, 3, 1, 0, 1], [-1, 1, 1, -1, 2, 2]], np.int64)
