@@ -57,6 +57,8 @@ class App:
         if self.scene_path is not None:
             self.plan = plan_scene(self.scene_path, self.registry, configs_root)
             self.config = self.plan.config
+            for warning in self.plan.warnings:
+                log.warning("%s", warning)
         self.seed = int(self.config.scene.seed if seed is None else seed)
         self.strict = strict
         self.schedule = self.registry.schedule
@@ -95,6 +97,11 @@ class App:
         records = spawn_plan(world, self.registry, self.plan) if self.plan is not None else []
         self.world, self.records = world, records  # only a fully built world replaces the running one
         return world
+
+    @property
+    def warnings(self) -> list[Problem]:
+        """The scene's warnings (``Registry.add_scene_check``): legal but probably not meant; logged at load."""
+        return list(self.plan.warnings) if self.plan is not None else []
 
     @property
     def dt(self) -> float:

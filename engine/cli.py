@@ -172,15 +172,21 @@ def validate_command(paths: list[Path]) -> int:
     registry = default_registry()
     files, problems = _toml_files(paths)
     failed = 0
+    warnings = []
     for path in files:
         try:
-            validate_file(path, registry)
+            result = validate_file(path, registry)
         except ConfigError as exc:
             problems.extend(exc.problems)
             failed += 1
+        else:
+            warnings.extend(getattr(result, "warnings", ()))
     for p in problems:
         print(p, file=sys.stderr)
-    print(f"validated {len(files)} file(s): {len(files) - failed} ok, {failed} with problems")
+    for w in warnings:
+        print(f"warning: {w}", file=sys.stderr)
+    print(f"validated {len(files)} file(s): {len(files) - failed} ok, {failed} with problems"
+          + (f", {len(warnings)} warning(s)" if warnings else ""))
     return 1 if problems else 0
 
 

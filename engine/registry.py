@@ -91,6 +91,7 @@ class Registry:
     render_features: list[Callable[..., Any]] = field(default_factory=list)
     commands: dict[str, Callable[..., Any]] = field(default_factory=dict)
     world_setup: list[Callable[[World], None]] = field(default_factory=list)
+    scene_checks: list[Callable[..., Any]] = field(default_factory=list)
     plugins: list[str] = field(default_factory=list)
 
     # -- registration
@@ -137,6 +138,13 @@ class Registry:
     def add_render_feature(self, factory: Callable[..., Any]) -> None:
         """``factory(renderer)`` returns an object with ``extract(world)`` and ``add_passes(graph, frame)``."""
         self.render_features.append(factory)
+
+    def add_scene_check(self, fn: Callable[..., Any]) -> None:
+        """``fn(plan, text)`` looks across a validated scene (``engine.scene.ScenePlan`` and the scene file's
+        text) and returns a list of ``engine.config.Problem`` *warnings*: things that are legal but probably not
+        meant, such as a name that refers to no entity of the scene (a script may still spawn it).  They never
+        stop a scene from loading; ``validate`` prints them and the app logs them (``App.warnings``)."""
+        self.scene_checks.append(fn)
 
     def on_world(self, fn: Callable[[World], None]) -> None:
         """Run ``fn(world)`` when a world is created (to insert resources)."""

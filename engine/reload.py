@@ -87,6 +87,8 @@ class HotReloader:
             log.error("reload failed; keeping the last good config:\n%s", exc)
             return False
         self.status.errors = []
+        for warning in plan.warnings:
+            log.warning("%s", warning)
         try:
             changes = self._apply(plan)
         except Exception as exc:  # noqa: BLE001 - a plugin's hook failing must not take the game down

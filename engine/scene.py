@@ -105,6 +105,7 @@ class ScenePlan:
     config: SceneConfig
     entities: list[EntityPlan] = field(default_factory=list)
     files: list[Path] = field(default_factory=list)  # the scene and every preset it read
+    warnings: list[Problem] = field(default_factory=list)  # legal but probably not meant (Registry.add_scene_check)
 
 
 def find_configs_root(path: Path) -> Path:
@@ -154,7 +155,22 @@ def plan_scene(path: str | Path, registry: Registry, configs_root: Path | None =
             problems.extend(found)
     if problems or config is None:
         raise ConfigError(problems)
-    return ScenePlan(path, root, config, entities, files)
+    plan = ScenePlan(path, root, config, entities, files)
+    plan.warnings = scene_warnings(registry, plan, text)
+    return plan
+
+
+def scene_warnings(registry: Registry, plan: ScenePlan, text: str) -> list[Problem]:
+    """Run the registered scene checks (``Registry.add_scene_check``).  A check that fails is itself reported
+    as a warning: a plugin's lint must not keep a valid scene from loading."""
+    found: list[Problem] = []
+    for check in registry.scene_checks:
+        try:
+            found.extend(check(plan, text))
+        except Exception as exc:  # noqa: BLE001
+            name = getattr(check, "__qualname__", repr(check))
+            found.append(Problem(str(plan.file), "", f"scene check {name} failed: {type(exc).__name__}: {exc}"))
+    return found
 
 
 def _valid_or_none(model: type[ConfigModel], data: Any) -> Any:

@@ -118,6 +118,28 @@ def screen_drag_command(world, entity, start, end, camera=None, target=None, int
     return pick_drag_command(world, entity, points[0], points[1], devil, interactive)
 
 
+def check_drag_cameras(plan, text: str) -> list:
+    """Scene check (warnings): a dust devil's ``drag_camera`` should name a camera entity of the scene, else a
+    mouse drag silently does nothing.  Only a warning: a script may spawn that camera later."""
+    from engine.config import Problem, format_key, locate_line, suggest
+
+    cameras = [ent.name for ent in plan.entities if ent.name and any(c == "Camera" for c, _ in ent.components)]
+    found = []
+    for i, ent in enumerate(plan.entities):
+        for cname, cfg in ent.components:
+            if cname != "DustDevil" or not cfg.drag_camera or cfg.drag_camera in cameras:
+                continue
+            key = ("entities", i, "components", "DustDevil", "drag_camera")
+            listed = ", ".join(f"'{c}'" for c in cameras) or "none"
+            how = ("" if "drag_camera" in cfg.model_fields_set else
+                   " (the default; set drag_camera = \"\" to turn mouse dragging off)")
+            found.append(Problem(str(plan.file), format_key(key),
+                                 f"no camera entity named '{cfg.drag_camera}' in this scene{how}; mouse drags of "
+                                 f"this dust devil will do nothing unless a script spawns it (cameras: {listed})",
+                                 None, suggest(cfg.drag_camera, cameras), locate_line(text, key)))
+    return found
+
+
 # ------------------------------------------------------------------------------------------------- systems
 def mouse_drag_system(world, dt: float) -> None:
     """Input stage: press in the top view picks the ground, moving the mouse moves the field by the picked
@@ -178,6 +200,7 @@ class _Plugin:
                                structural=("particle_count",))
         registry.add_system(mouse_drag_system, Stage.INPUT, name="dust_devil.mouse_drag", after=("core.input",))
         registry.add_system(simulate_system, Stage.SIMULATION, name="dust_devil.simulate")
+        registry.add_scene_check(check_drag_cameras)
         registry.add_command("dust_devil.drag", drag_command)
         registry.add_command("dust_devil.pick_drag", pick_drag_command)
         registry.add_command("dust_devil.screen_drag", screen_drag_command)

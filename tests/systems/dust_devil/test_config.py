@@ -110,3 +110,60 @@ def test_the_papers_terrain_is_a_terrain_preset_at_the_papers_spacing(registry):
     (terrain,) = [t for _, (t,) in app.world.query(Terrain)]
     assert terrain.field.heights.shape == (65, 65) and terrain.field.spacing == 2.0
     assert str(preset) in map(str, app.plan.files)
+
+
+# ------------------------------------------------------------------ drag_camera names a camera (a warning)
+def _scene(tmp_path, devil: str, cameras=("main", "top")) -> Path:
+    configs = tmp_path / "configs" / "scenes"
+    configs.mkdir(parents=True)
+    text = "[scene]\nname = \"t\"\n\n[[entities]]\nname = \"devil\"\n[entities.components.DustDevil]\n" + devil
+    for name in cameras:
+        text += f"\n[[entities]]\nname = \"{name}\"\n[entities.components.Camera]\n"
+    path = configs / "s.toml"
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def test_a_drag_camera_naming_no_camera_is_a_warning_with_the_key_line_and_a_suggestion(tmp_path, registry, capsys):
+    from engine.cli import validate_command
+
+    path = _scene(tmp_path, 'particle_count = 100\ndrag_camera = "topp"\n')
+    plan = validate_file(path, registry)  # loads: a script may spawn the camera later
+    [warning] = plan.warnings
+    assert warning.key == "entities[0].components.DustDevil.drag_camera"
+    assert warning.line == 8 and warning.suggestion == "top"
+    assert "no camera entity named 'topp'" in warning.message and "'main', 'top'" in warning.message
+    assert validate_command([path]) == 0  # printed, not failed
+    err = capsys.readouterr()
+    assert f"warning: {path}:8: entities[0].components.DustDevil.drag_camera" in err.err
+    assert "1 warning(s)" in err.out
+
+
+def test_the_default_drag_camera_missing_says_how_to_turn_dragging_off(tmp_path, registry):
+    plan = validate_file(_scene(tmp_path, "particle_count = 100\n", cameras=("main",)), registry)
+    [warning] = plan.warnings
+    assert "'top'" in warning.message and 'drag_camera = ""' in warning.message
+
+
+@pytest.mark.parametrize("devil, cameras", [('drag_camera = "top"\n', ("main", "top")),
+                                            ('drag_camera = ""\n', ("main",))])
+def test_a_named_camera_or_dragging_off_gives_no_warning(tmp_path, registry, devil, cameras):
+    assert validate_file(_scene(tmp_path, "particle_count = 100\n" + devil, cameras), registry).warnings == []
+
+
+def test_the_app_logs_the_warning_and_keeps_it(tmp_path, caplog):
+    from engine.app import App
+
+    with caplog.at_level("WARNING", logger="engine"):
+        app = App(_scene(tmp_path, 'particle_count = 100\ndrag_camera = "minimap"\n'))
+    assert [w.key for w in app.warnings] == ["entities[0].components.DustDevil.drag_camera"]
+    assert "no camera entity named 'minimap'" in caplog.text
+
+
+def test_a_failing_scene_check_is_a_warning_not_a_crash(tmp_path):
+    from engine.scene import plan_scene
+
+    registry = default_registry()
+    registry.add_scene_check(lambda plan, text: 1 / 0)
+    plan = plan_scene(_scene(tmp_path, "particle_count = 100\n"), registry)
+    assert any("ZeroDivisionError" in w.message for w in plan.warnings)
