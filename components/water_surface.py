@@ -237,11 +237,24 @@ class RigidBody(ConfigModel):
     kinematic: bool = Field(False, description="Moved by scripts only (no forces); still makes waves.")
     restitution: float = Field(0.2, ge=0.0, le=1.0, description="Bounce off the pool's floor and walls.")
     friction: float = Field(0.5, ge=0.0, le=2.0, description="Coulomb friction on the pool's floor and walls.")
+    max_speed: float = Field(1000.0, gt=0.0, le=1.0e5,
+                             description="Speed limit in m/s, applied every sub-step: impulses from scripts and "
+                                         "impacts cannot make a body's state overflow.")
+    max_angular_speed: float = Field(100.0, gt=0.0, le=1000.0,
+                                     description="Spin limit in rad/s, applied every sub-step (as PhysX's "
+                                                 "maxAngularVelocity): the explicit gyroscopic term ω × Iω grows "
+                                                 "without bound at high spin.")
 
     @model_validator(mode="after")
     def _sizes(self) -> RigidBody:
         if self.shape == "box" and (min(self.half_extents) < 1e-3 or max(self.half_extents) > 10000.0):
             raise ValueError(f"half_extents must be in [0.001, 10000] for a box, got {list(self.half_extents)}")
+        for key, limit_key in (("velocity", "max_speed"), ("angular_velocity", "max_angular_speed")):
+            value, limit = getattr(self, key), getattr(self, limit_key)
+            length = math.sqrt(sum(x * x for x in value))
+            if length > limit:
+                raise ValueError(f"{key} {list(value)} has length {length:g}, above {limit_key} = {limit:g}; "
+                                 f"lower it or raise {limit_key}")
         return self
 
 

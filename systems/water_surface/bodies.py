@@ -28,7 +28,7 @@ from engine.spatial import cross, quat_mul
 from systems.water_surface import kernels as K
 from systems.water_surface.geometry import BOX, F64, SPHERE, Grid, all_of, bilinear_slope_pair, max_of, sum_of
 
-__all__ = ["BodyArrays", "apply_impulses", "inertia", "integrate", "pool_contacts", "water_forces"]
+__all__ = ["BodyArrays", "apply_impulses", "inertia", "integrate", "limit_speeds", "pool_contacts", "water_forces"]
 
 _BOX_N = 4
 _SPHERE_N = 5
@@ -96,6 +96,8 @@ class BodyArrays:
     angular_damping: F64
     restitution: F64
     friction: F64
+    max_speed: F64  # (B,) m/s
+    max_spin: F64  # (B,) rad/s
 
     def __len__(self) -> int:
         return len(self.mass)
@@ -213,6 +215,7 @@ def integrate(bodies: BodyArrays, dt: float, water: tuple | None, linear_drag: f
     decay_w = np.exp(-bodies.angular_damping * h)[:, None]
     weight = bodies.mass * bodies.gravity
     for _ in range(n):  # sub-steps, vectorized over bodies
+        limit_speeds(bodies)
         rot = quat_to_matrix(bodies.rotation)
         force = bodies.force.copy()
         force[:, 1] -= weight
@@ -241,7 +244,28 @@ def integrate(bodies: BodyArrays, dt: float, water: tuple | None, linear_drag: f
         bodies.position = bodies.position + h * bodies.velocity
         q = bodies.rotation + (0.5 * h) * _spin_product(spin, bodies.rotation)
         bodies.rotation = q / np.sqrt(sum_of(q * q, axis=1))[:, None]
+    limit_speeds(bodies)
     return submerged
+
+
+def _limit(v: F64, limit: F64) -> F64:
+    """Rows of ``v`` (B, 3) longer than ``limit`` (B,) scaled down to it; the same array when none is (the
+    same bits), and a non-finite row becomes zero (a body that overflowed stops instead of poisoning the water)."""
+    length2 = v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1] + v[:, 2] * v[:, 2]
+    over = ~(length2 <= limit * limit)  # NaN compares false: caught here
+    if not over.any():
+        return v
+    v = v.copy()
+    finite = np.isfinite(length2) & over
+    v[finite] *= (limit[finite] / np.sqrt(length2[finite]))[:, None]
+    v[over & ~finite] = 0.0
+    return v
+
+
+def limit_speeds(bodies: BodyArrays) -> None:
+    """Clamp speed and spin to the bodies' ``max_speed`` / ``max_angular_speed`` (RigidBody)."""
+    bodies.velocity = _limit(bodies.velocity, bodies.max_speed)
+    bodies.spin = _limit(bodies.spin, bodies.max_spin)
 
 
 def _spin_product(spin: F64, q: F64) -> F64:

@@ -133,8 +133,8 @@ def bodies_system(world: World, dt: float) -> None:
         return
     _, transforms, configs, states, colliders = zip(*rows)
     scale = np.abs(np.array([t.scale for t in transforms]))
-    constants = np.array([(c.mass, c.gravity, c.linear_damping, c.angular_damping, c.restitution, c.friction)
-                          for c in configs]).T
+    constants = np.array([(c.mass, c.gravity, c.linear_damping, c.angular_damping, c.restitution, c.friction,
+                           c.max_speed, c.max_angular_speed) for c in configs]).T
     arrays = BodyArrays(
         shapes=np.array([BOX if c.shape == "box" else SPHERE for c in colliders], np.int8),
         half=np.array([c.half_extents for c in colliders]) * scale,
@@ -144,7 +144,7 @@ def bodies_system(world: World, dt: float) -> None:
         velocity=np.array([s.velocity for s in states]), spin=np.array([s.angular_velocity for s in states]),
         force=np.array([s.force for s in states]), torque=np.array([s.torque for s in states]),
         gravity=constants[1], linear_damping=constants[2], angular_damping=constants[3],
-        restitution=constants[4], friction=constants[5],
+        restitution=constants[4], friction=constants[5], max_speed=constants[6], max_spin=constants[7],
     )
     apply_impulses(arrays, np.array([s.impulse for s in states]), np.array([s.angular_impulse for s in states]))
     owner = -np.ones(len(rows), np.int64)
@@ -183,7 +183,7 @@ def bodies_system(world: World, dt: float) -> None:
 
 
 _FIELDS = ("shapes", "half", "radius", "mass", "position", "rotation", "velocity", "spin", "force", "torque",
-           "gravity", "linear_damping", "angular_damping", "restitution", "friction")
+           "gravity", "linear_damping", "angular_damping", "restitution", "friction", "max_speed", "max_spin")
 
 
 def _take(arrays: BodyArrays, index: np.ndarray) -> BodyArrays:

@@ -53,7 +53,7 @@ def test_inertia_follows_the_shape():
                         rotation=np.tile([1.0, 0, 0, 0], (2, 1)), velocity=np.zeros((2, 3)), spin=np.zeros((2, 3)),
                         force=np.zeros((2, 3)), torque=np.zeros((2, 3)), gravity=np.zeros(2),
                         linear_damping=np.zeros(2), angular_damping=np.zeros(2), restitution=np.zeros(2),
-                        friction=np.zeros(2))
+                        friction=np.zeros(2), max_speed=np.full(2, 1e3), max_spin=np.full(2, 1e2))
     moments = inertia(bodies)
     assert moments[0] == pytest.approx([4.0 + 9.0, 1.0 + 9.0, 1.0 + 4.0])  # m/12·(b² + c²), full sizes 1, 2, 3
     assert moments[1] == pytest.approx([16.0] * 3)  # 2/5·m·r²
@@ -165,3 +165,33 @@ def test_a_kinematic_body_follows_its_script_and_keeps_its_velocity(tmp_path):
     assert app.world.get(barge, Transform).position == pytest.approx([-0.4, 0.0, 0.0])
     assert app.world.get(barge, RigidBodyState).velocity == pytest.approx([0.6, 0.0, 0.0])
     assert np.abs(app.world.get(_entity(app, "water"), WaterState).heights).max() > 1e-3  # it made waves
+
+
+# ----------------------------------------------------------------------------- speed limits (robustness)
+def test_an_initial_spin_above_the_limit_is_a_config_error_naming_both_keys():
+    from engine.config import ConfigError, validate
+
+    with pytest.raises(ConfigError) as err:
+        validate(RigidBody, {"angular_velocity": [1.0e6, 0.0, 0.0]}, "crate.toml")
+    assert "angular_velocity" in str(err.value) and "max_angular_speed = 100" in str(err.value)
+    validate(RigidBody, {"angular_velocity": [1.0e3, 0.0, 0.0], "max_angular_speed": 1000.0}, "crate.toml")
+
+
+@pytest.mark.parametrize("spin, impulse", [(5.0e3, 0.0), (0.0, 1.0e300), (0.0, float("inf"))])
+def test_spin_and_speed_stay_finite_and_limited_whatever_a_script_gives_a_body(tmp_path, spin, impulse):
+    """An asymmetric box spun at 5000 rad/s (explicit gyroscopic term: it blew up to NaN and crashed the water's
+    rasterisation of the body) or kicked with an overflowing impulse keeps a finite state within its limits."""
+    app = _app(tmp_path, _body("crate", (0.2, 0.2, -0.1), scale=(1.0, 0.3, 0.6), mass=100.0,
+                               max_angular_speed=1000.0))
+    crate = _entity(app, "crate")
+    state = app.world.get(crate, RigidBodyState)
+    state.angular_velocity = np.array([spin, 0.3 * spin, 0.1 * spin])
+    state.impulse = np.array([impulse, 0.0, 0.0])
+    with np.errstate(over="ignore", invalid="ignore"):
+        app.step(40)
+    t, state = app.world.get(crate, Transform), app.world.get(crate, RigidBodyState)
+    assert np.isfinite(t.position).all() and np.isfinite(t.rotation).all()
+    assert np.linalg.norm(state.angular_velocity) <= 1000.0 * (1 + 1e-12)
+    assert np.linalg.norm(state.velocity) <= 1000.0 * (1 + 1e-12)
+    water = app.world.query(WaterState)[0][1][0]
+    assert np.isfinite(water.heights).all()
