@@ -28,15 +28,15 @@ class CameraConfig(ConfigModel):
 
     projection: Literal["perspective", "orthographic"] = Field("perspective")
     fov: float = Field(60.0, ge=5.0, le=150.0, description="Vertical field of view in degrees (perspective).")
-    ortho_height: float = Field(40.0, gt=0.0, le=1e5, description="World height of the view (orthographic).")
-    near: float = Field(0.1, gt=0.0, le=1e4, description="Near clip distance.")
+    ortho_height: float = Field(40.0, ge=1e-3, le=1e5, description="World height of the view (orthographic).")
+    near: float = Field(0.1, ge=1e-4, le=1e4, description="Near clip distance (a tenth of a millimetre at least: the projection is single precision).")
     far: float = Field(500.0, gt=0.0, le=1e6, description="Far clip distance.")
     viewport: Vec4 = Field((0.0, 0.0, 1.0, 1.0),
                            description="x, y, width, height as fractions of the window (origin bottom-left).")
     priority: int = Field(0, ge=-100, le=100, description="Views render in ascending priority; the lowest is main.")
     controller: Literal["none", "orbit", "fly", "top"] = Field("orbit")
     target: Vec3 = Field((0.0, 0.0, 0.0), description="Orbit / top-view centre.")
-    distance: float = Field(20.0, gt=0.0, le=1e5, description="Orbit distance.")
+    distance: float = Field(20.0, ge=1e-3, le=1e5, description="Orbit distance.")
     yaw: float = Field(30.0, ge=-360.0, le=360.0, description="Initial yaw in degrees.")
     pitch: float = Field(-25.0, ge=-89.0, le=89.0, description="Initial pitch in degrees (negative looks down).")
     move_speed: float = Field(10.0, ge=0.0, le=1000.0, description="Fly speed in metres per second.")

@@ -60,3 +60,16 @@ def test_camera_config_rejects_inconsistent_values():
                       ({"viewport": [0.0, 0.0, 0.0, 1.0]}, "inside")):
         with pytest.raises(ConfigError, match=text):
             validate(CameraConfig, bad, "camera.toml")
+
+
+def test_camera_config_rejects_sizes_below_single_precision():
+    """A near plane or ortho height of 1e-300 validated and filled the projection with inf and NaN (the
+    matrices are single precision); the lower bounds name the key."""
+    import pytest
+
+    from engine.config import ConfigError, validate
+
+    for key in ("near", "ortho_height", "distance"):
+        with pytest.raises(ConfigError, match=rf"{key}: expected greater than or equal to 0\.0001|{key}: expected "
+                                              rf"greater than or equal to 0\.001"):
+            validate(CameraConfig, {key: 1e-300}, "camera.toml")
