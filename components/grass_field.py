@@ -192,14 +192,18 @@ class GrassFieldConfig(ConfigModel):
                              "lower grid_x, grid_z or plants_per_cell")
         return self
 
+    def level0_triangles(self) -> int:
+        """The most triangles one level-0 plant may have, about (estimate used by the limits and warnings)."""
+        branches = self.branch_count + self.branch_count_jitter
+        segments = self.branch_segments + self.branch_segments_jitter
+        return branches * segments * (self.stem_sides + 2 * math.ceil(self.leaf_subdivisions[0]))
+
     @model_validator(mode="after")
     def _plant_detail(self) -> GrassFieldConfig:
         """A level-0 plant has about (branches) · (segments) · (stem_sides + 2 · leaf subdivisions) triangles (the
         paper's plant: about 1,000). Every shape bound at its maximum made 70,000 a plant, drawn for each near
         plant every frame."""
-        branches = self.branch_count + self.branch_count_jitter
-        segments = self.branch_segments + self.branch_segments_jitter
-        estimate = branches * segments * (self.stem_sides + 2 * math.ceil(self.leaf_subdivisions[0]))
+        estimate = self.level0_triangles()
         if estimate > MAX_PLANT_DETAIL:
             raise ValueError(f"(branch_count + jitter) * (branch_segments + jitter) * (stem_sides + 2 * "
                              f"leaf_subdivisions[0]) = {estimate} exceeds {MAX_PLANT_DETAIL} (about the triangles "

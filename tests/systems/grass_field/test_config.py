@@ -79,3 +79,18 @@ def test_preset_value_overridden_inline(tmp_path, registry):
     plan = plan_scene(path, registry)
     cfg = dict(plan.entities[0].components)["GrassField"]
     assert (cfg.grid_x, cfg.grid_z, cfg.cell_size) == (3, 2, 100.0)
+
+
+CAMERA = "[entities.components.Transform]\nposition = [0.0, 30.0, 0.0]\n[entities.components.Camera]\nfov = 60.0\n"
+
+
+@pytest.mark.parametrize("length, warned", [(0.5, False), (100.0, True)])
+def test_a_length_of_interest_that_makes_most_cells_level_0_is_a_warning(tmp_path, registry, length, warned):
+    """Eq. 1 with L = 100 on the paper's grid (40 x 40 cells of 100, 40 plants) makes every cell within about
+    12,000 units level 0 at 960 px: about 80 M triangles a frame.  Legal (the paper's rule), so a warning, not an error."""
+    body = f'preset = "grass_field/paper"\ngrid_x = 40\ngrid_z = 40\nplants_per_cell = 40\nlength_of_interest = {length}'
+    plan = plan_scene(write_scene(tmp_path, scene_text(body, CAMERA, terrain=False)), registry)
+    found = [w for w in plan.warnings if w.key.endswith("GrassField.length_of_interest")]
+    assert bool(found) == warned
+    if warned:
+        assert "level 0" in found[0].message and "M triangles a frame" in found[0].message and found[0].line
