@@ -115,6 +115,15 @@ class DustDevilConfig(ConfigModel):
             raise ValueError(f"min {value[0]} must not exceed max {value[1]}")
         return value
 
+    def scene_budgets(self, fixed_dt: float) -> list[tuple[str, float, float]]:
+        """(what, cost, limit) that every entity of a scene shares (engine.scene: the sum of each is capped)."""
+        points = self.particle_count * self.sub_particles * self.repeats if self.pbvr else 0
+        fill = (points if self.pbvr else self.particle_count) * self.point_size ** 2
+        return [("PBVR points a frame (particle_count * sub_particles * repeats)", points, MAX_PBVR_POINTS),
+                ("point pixels a frame (points * point_size²)", fill, MAX_POINT_FILL),
+                ("prewarm particle steps (particle_count * substeps * prewarm_time / fixed_dt)",
+                 self.particle_count * self.substeps * round(self.prewarm_time / fixed_dt), MAX_PREWARM_WORK)]
+
     @model_validator(mode="after")
     def _point_budget(self) -> DustDevilConfig:
         """PBVR draws particle_count · sub_particles · repeats points a frame: each bound alone is sane, all three

@@ -221,6 +221,11 @@ class EnergyWaveEmitter(ConfigModel):
             raise ValueError("at least one control point needs a probability > 0")
         return points
 
+    def scene_budgets(self, fixed_dt: float) -> list[tuple[str, float, float]]:
+        """(what, cost, limit) that every entity of a scene shares (engine.scene: the sum of each is capped)."""
+        return [("sprites (max_particles * max(trail_textures, splash_samples))",
+                 self.max_particles * max(self.trail_textures, self.splash_samples), MAX_SPRITES)]
+
     @model_validator(mode="after")
     def _sprite_budget(self) -> EnergyWaveEmitter:
         """Every particle may become a trail of M sprites or a bar of N: the sprite buffers hold max_particles ·

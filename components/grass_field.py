@@ -184,6 +184,11 @@ class GrassFieldConfig(ConfigModel):
                                  "with x_min < x_max and z_min < z_max")
         return areas
 
+    def scene_budgets(self, fixed_dt: float) -> list[tuple[str, float, float]]:
+        """(what, cost, limit) that every entity of a scene shares (engine.scene: the sum of each is capped)."""
+        return [("plants (grid_x * grid_z * plants_per_cell)", self.grid_x * self.grid_z * self.plants_per_cell,
+                 MAX_PLANTS)]
+
     @model_validator(mode="after")
     def _plant_budget(self) -> GrassFieldConfig:
         plants = self.grid_x * self.grid_z * self.plants_per_cell

@@ -159,6 +159,13 @@ class ToonSmokeVolumeConfig(ConfigModel):
     outline_depth_threshold: float = Field(0.04, gt=0.0, le=10.0,
                                            description="Relative depth jump that draws an inner contour line.")
 
+    def scene_budgets(self, fixed_dt: float) -> list[tuple[str, float, float]]:
+        """(what, cost, limit) that every entity of a scene shares (engine.scene: the sum of each is capped)."""
+        sim = math.prod(self.simulation_resolution)
+        return [("smoke solver work (simulation cells * (diffusion_iterations + pressure_iterations))",
+                 sim * (self.diffusion_iterations + self.pressure_iterations), MAX_SOLVER_WORK),
+                ("smoke display cells", math.prod(self.display_resolution), MAX_DISPLAY_CELLS)]
+
     @model_validator(mode="after")
     def _check_consistency(self) -> ToonSmokeVolumeConfig:
         sim, disp = self.simulation_resolution, self.display_resolution

@@ -153,11 +153,36 @@ def plan_scene(path: str | Path, registry: Registry, configs_root: Path | None =
             ent, found = plan_entity(registry, raw, path, text, ("entities", i), root, files, context)
             entities.append(ent)
             problems.extend(found)
+    if config is not None and not problems:
+        problems.extend(scene_budget_problems(path, config, entities))
     if problems or config is None:
         raise ConfigError(problems)
     plan = ScenePlan(path, root, config, entities, files)
     plan.warnings = scene_warnings(registry, plan, text)
     return plan
+
+
+def scene_budget_problems(path: Path, config: SceneConfig, entities: list[EntityPlan]) -> list[Problem]:
+    """A component's joint limits (``scene_budgets(fixed_dt)``: what, cost, limit) hold for the whole scene too:
+    each limit bounds one entity, and a scene may hold 100,000 entities, so the sum over every entity of a
+    component is capped by the same limit (two fields of 600,000 plants are refused like one of 1.2 million)."""
+    totals: dict[tuple[str, str], list] = {}
+    for i, ent in enumerate(entities):
+        for cname, cfg in ent.components:
+            budgets = getattr(cfg, "scene_budgets", None)
+            for what, cost, limit in (budgets(config.scene.fixed_dt) if callable(budgets) else ()):
+                entry = totals.setdefault((cname, what), [0, limit, []])
+                entry[0] += cost
+                if cost:
+                    entry[2].append(i)
+    problems = []
+    for (cname, what), (total, limit, users) in totals.items():
+        if total > limit and len(users) > 1:  # one entity over its limit is its own model's error
+            listed = ", ".join(f"entities[{i}]" for i in users[:6]) + (", ..." if len(users) > 6 else "")
+            problems.append(Problem(str(path), "entities", f"the scene's {len(users)} {cname} entities together "
+                                    f"need {total:,.0f} {what}, more than the {limit:,.0f} one entity may have "
+                                    f"({listed}); lower them or use fewer", None))
+    return problems
 
 
 def scene_warnings(registry: Registry, plan: ScenePlan, text: str) -> list[Problem]:
