@@ -103,7 +103,7 @@ class GrassFieldConfig(ConfigModel):
                                       description="Level 3 dotted line: dot spacing in pixels at the 2→3 switch "
                                                   "(fakes the faintness of a 1-pixel line).")
     length_of_interest: float = Field(0.5, gt=0.0, le=100.0,
-                                      description="L of eq. 1: the stem diameter or leaf width measured in pixels "
+                                      description="L of eq. 1: the stem diameter or leaf width, in world units "
                                                   "(paper: 0.5, the stem diameter).")
     level_thresholds: Vec4 = Field((4.0, 1.5, 1.0, 0.75),
                                    description="Table 2: pseudo-pixel counts P at the switches 0⇄1, 1⇄2, 2⇄3, 3⇄4.")

@@ -34,6 +34,7 @@ class ReloadStatus:
     """World resource: the outcome of the last reload (errors stay until the files are fixed)."""
 
     errors: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)  # the scene's warnings (App.warnings), kept up to date
     reloads: int = 0
     last_changes: list[str] = field(default_factory=list)
 
@@ -53,7 +54,7 @@ class HotReloader:
         if app.plan is None:
             raise ValueError("hot reload needs an app built from a scene file")
         self.app = app
-        self.status = ReloadStatus()
+        self.status = ReloadStatus(warnings=[str(w) for w in app.warnings])
         app.world.insert_resource(self.status)
         self._prints: dict[Path, tuple] = {}
         self._watch(app.plan.files)
@@ -87,6 +88,7 @@ class HotReloader:
             log.error("reload failed; keeping the last good config:\n%s", exc)
             return False
         self.status.errors = []
+        self.status.warnings = [str(w) for w in plan.warnings]
         for warning in plan.warnings:
             log.warning("%s", warning)
         try:

@@ -153,7 +153,7 @@ def plan_scene(path: str | Path, registry: Registry, configs_root: Path | None =
             ent, found = plan_entity(registry, raw, path, text, ("entities", i), root, files, context)
             entities.append(ent)
             problems.extend(found)
-    if config is not None and not problems:
+    if config is not None:  # over the entities that validated: every problem is reported at once
         problems.extend(scene_budget_problems(path, config, entities))
     if problems or config is None:
         raise ConfigError(problems)

@@ -659,6 +659,9 @@ class HudFeature(RenderFeature):
             lines = ("config error - the last good config stays in force until the file is fixed:",
                      *status.errors[:12])
             items.append(("bottom_left", lines, 14, (255, 120, 110)))
+        elif status is not None and status.warnings:
+            lines = ("config warning - legal, but probably not meant:", *status.warnings[:6])
+            items.append(("bottom_left", lines, 14, (255, 210, 90)))
         if self.renderer.show_profiler:
             t = self.renderer.timer
             rows = [f"{name:<28s}{ms:7.2f} ms" for name, ms in sorted(t.last.items(), key=lambda kv: -kv[1])[:14]]

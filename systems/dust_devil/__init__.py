@@ -123,7 +123,8 @@ def check_drag_cameras(plan, text: str) -> list:
     mouse drag silently does nothing.  Only a warning: a script may spawn that camera later."""
     from engine.config import Problem, format_key, locate_line, suggest
 
-    cameras = [ent.name for ent in plan.entities if ent.name and any(c == "Camera" for c, _ in ent.components)]
+    cameras = [ent.name for ent in plan.entities  # what screen_pick finds: Name, Camera and Transform
+               if ent.name and {"Camera", "Transform"} <= {c for c, _ in ent.components}]
     found = []
     for i, ent in enumerate(plan.entities):
         for cname, cfg in ent.components:
@@ -134,7 +135,7 @@ def check_drag_cameras(plan, text: str) -> list:
             how = ("" if "drag_camera" in cfg.model_fields_set else
                    " (the default; set drag_camera = \"\" to turn mouse dragging off)")
             found.append(Problem(str(plan.file), format_key(key),
-                                 f"no camera entity named '{cfg.drag_camera}' in this scene{how}; mouse drags of "
+                                 f"no camera entity named '{cfg.drag_camera}' (with Camera and Transform) in this scene{how}; mouse drags of "
                                  f"this dust devil will do nothing unless a script spawns it (cameras: {listed})",
                                  None, suggest(cfg.drag_camera, cameras), locate_line(text, key)))
     return found

@@ -27,40 +27,49 @@ LEVEL0_TRIANGLE_WARNING = 2_000_000  # level-0 triangles a frame: about 0.6 s on
 
 
 def check_level_zero_load(plan, text: str) -> list:
-    """Scene check (warnings): eq. 1 with the scene's main camera and window puts every cell nearer than
-    D₀ = W·L / (2·tan θ·P₀) at level 0.  A length of interest far above the stem's real width makes that most of
-    the field, drawn at full detail every frame: legal (it is the paper's rule), but seconds a frame."""
+    """Scene check (warnings): eq. 1 puts every cell nearer than D₀ = W·L / (2·tan θ·P₀) at level 0, for each
+    view that draws the field (every enabled perspective camera with a Transform that does not hide it; the
+    renderer's default view when the scene has no camera).  A length of interest far above the stem's real
+    width makes that most of the field, drawn at full detail every frame: legal (it is the paper's rule), but
+    seconds a frame.  The worst view is named."""
     import math
 
     from engine.config import Problem, format_key, locate_line
+    from engine.render.components import CameraConfig
 
     render = plan.config.render
-    cameras = [cfg for ent in plan.entities for c, cfg in ent.components
-               if c == "Camera" and cfg.projection == "perspective"]
-    if not cameras:
-        return []
-    main = min(cameras, key=lambda cfg: cfg.priority)
-    width = render.width * render.render_scale * main.viewport[2]
-    height = render.height * render.render_scale * main.viewport[3]
-    tan_x = math.tan(math.radians(main.fov) / 2.0) * width / max(height, 1.0)
+    views = [(ent.name or f"camera {i}", dict(ent.components)["Camera"]) for i, ent in enumerate(plan.entities)
+             if {"Camera", "Transform"} <= {c for c, _ in ent.components}]
+    if not any(c == "Camera" for ent in plan.entities for c, _ in ent.components):
+        views = [("the default view", CameraConfig(controller="none"))]
+    views = [(name, cam) for name, cam in views
+             if cam.enabled and cam.projection == "perspective" and "grass_field" not in cam.hide_features]
     found = []
     for i, ent in enumerate(plan.entities):
         for cname, cfg in ent.components:
             if cname != "GrassField":
                 continue
-            d0 = width * cfg.length_of_interest / (2.0 * tan_x * cfg.level_thresholds[0])
-            view = min(1.0, 2.0 * 2.0 * math.atan(tan_x) / (2.0 * math.pi))  # culling keeps up to twice the angle
-            cells = min(cfg.grid_x * cfg.grid_z, math.pi * d0 * d0 / cfg.cell_size ** 2 * view)
-            triangles = cells * cfg.plants_per_cell * cfg.level0_triangles()
-            if triangles <= LEVEL0_TRIANGLE_WARNING:
+            worst = None
+            for name, cam in views:
+                width = render.width * render.render_scale * cam.viewport[2]
+                height = render.height * render.render_scale * cam.viewport[3]
+                tan_x = math.tan(math.radians(cam.fov) / 2.0) * width / max(height, 1.0)
+                d0 = width * cfg.length_of_interest / (2.0 * tan_x * cfg.level_thresholds[0])
+                view = min(1.0, 2.0 * 2.0 * math.atan(tan_x) / (2.0 * math.pi))  # culling keeps twice the angle
+                cells = min(cfg.grid_x * cfg.grid_z, math.pi * d0 * d0 / cfg.cell_size ** 2 * view)
+                triangles = cells * cfg.plants_per_cell * cfg.level0_triangles()
+                if worst is None or triangles > worst[0]:
+                    worst = (triangles, name, width, d0, cells)
+            if worst is None or worst[0] <= LEVEL0_TRIANGLE_WARNING:
                 continue
+            triangles, name, width, d0, cells = worst
             key = ("entities", i, "components", "GrassField", "length_of_interest")
             found.append(Problem(
                 str(plan.file), format_key(key),
-                f"with the main camera at {width:.0f} px wide, every cell within D0 = {d0:.4g} units is level 0 "
-                f"(eq. 1, P >= {cfg.level_thresholds[0]:g}): about {cells:.0f} cells, {triangles / 1e6:.1f} M "
-                f"triangles a frame; L is the stem's diameter in world units (the paper: 0.5 for plants about 20 "
-                f"tall, cells of 100)", cfg.length_of_interest, None, locate_line(text, key)))
+                f"in '{name}' ({width:.0f} px wide) every cell within D0 = {d0:.4g} units is level 0 (eq. 1, "
+                f"P >= {cfg.level_thresholds[0]:g}): about {cells:.0f} cells, {triangles / 1e6:.1f} M triangles a "
+                f"frame; L is the stem's diameter in world units (the paper: 0.5 for plants about 20 tall, cells "
+                f"of 100)", cfg.length_of_interest, None, locate_line(text, key)))
     return found
 
 

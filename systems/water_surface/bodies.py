@@ -232,6 +232,7 @@ def integrate(bodies: BodyArrays, dt: float, water: tuple | None, linear_drag: f
             bodies.velocity = (bodies.velocity + h * accel) / (1.0 + h * drag)[:, None] * decay_v
         else:
             bodies.velocity = (bodies.velocity + h * (force / bodies.mass[:, None])) * decay_v
+        bodies.velocity = _limit(bodies.velocity, bodies.max_speed)  # before the position moves with it
         # Euler's equations in the body frame: I·ω̇ = τ − ω × I·ω, with I = R·M·Rᵀ (M the principal moments)
         spin_body = _unrotate(rot, bodies.spin)
         gyro = cross(spin_body, moments * spin_body)
@@ -240,25 +241,30 @@ def integrate(bodies: BodyArrays, dt: float, water: tuple | None, linear_drag: f
         if water is not None:
             spin /= (1.0 + h * angular_drag * submerged / volume)[:, None]
         spin *= decay_w
-        bodies.spin = spin
+        bodies.spin = spin = _limit(spin, bodies.max_spin)  # before the rotation turns with it
         bodies.position = bodies.position + h * bodies.velocity
         q = bodies.rotation + (0.5 * h) * _spin_product(spin, bodies.rotation)
         bodies.rotation = q / np.sqrt(sum_of(q * q, axis=1))[:, None]
-    limit_speeds(bodies)
     return submerged
 
 
 def _limit(v: F64, limit: F64) -> F64:
     """Rows of ``v`` (B, 3) longer than ``limit`` (B,) scaled down to it; the same array when none is (the
-    same bits), and a non-finite row becomes zero (a body that overflowed stops instead of poisoning the water)."""
-    length2 = v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1] + v[:, 2] * v[:, 2]
-    over = ~(length2 <= limit * limit)  # NaN compares false: caught here
-    if not over.any():
-        return v
-    v = v.copy()
-    finite = np.isfinite(length2) & over
-    v[finite] *= (limit[finite] / np.sqrt(length2[finite]))[:, None]
-    v[over & ~finite] = 0.0
+    same bits).  A row with a non-finite component becomes zero (a body that overflowed stops instead of
+    poisoning the water); a finite row too long to square (1e200) is scaled by its largest component first."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        length2 = v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1] + v[:, 2] * v[:, 2]
+        over = ~(length2 <= limit * limit)  # NaN compares false: caught here
+        if not over.any():
+            return v
+        v = v.copy()
+        finite = np.isfinite(v).all(axis=1) & over
+        rows = v[finite]
+        big = np.abs(rows).max(axis=1)
+        unit = rows / big[:, None]
+        length = big * np.sqrt(unit[:, 0] * unit[:, 0] + unit[:, 1] * unit[:, 1] + unit[:, 2] * unit[:, 2])
+        v[finite] = rows * (limit[finite] / length)[:, None]
+        v[over & ~finite] = 0.0
     return v
 
 

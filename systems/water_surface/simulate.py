@@ -22,7 +22,7 @@ from engine.impacts import Impact
 from engine.spatial import Transform, cross
 from engine.world import World
 from systems.water_surface import kernels as K
-from systems.water_surface.bodies import BodyArrays, apply_impulses, integrate, pool_contacts
+from systems.water_surface.bodies import BodyArrays, apply_impulses, integrate, limit_speeds, pool_contacts
 from systems.water_surface.geometry import BOX, SPHERE, Bodies, Grid, bilinear, empty_bodies
 from systems.water_surface.surface import step_water
 
@@ -168,6 +168,7 @@ def bodies_system(world: World, dt: float) -> None:
             submerged[index] = integrate(group, dt, (state.heights, state.previous, grid), cfg.linear_drag,
                                          cfg.angular_drag, cfg.water_density)
             pool_contacts(group, grid, grid.y0 - cfg.depth, np.ones(len(index), bool))
+            limit_speeds(group)  # contact impulses may spin a body past its limit
         if not whole:
             _put(arrays, index, group)
     # write back: rows of fresh arrays (one copy each, not one per body)

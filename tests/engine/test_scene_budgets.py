@@ -45,3 +45,10 @@ def test_many_dust_devils_each_legal_are_refused_together(tmp_path):
     """Each draws 5 M PBVR points a frame (the limit is 8 M); two are 10 M."""
     with pytest.raises(ConfigError, match="2 DustDevil entities together need 10,000,000 PBVR points"):
         plan_scene(_scene(tmp_path, [DEVIL, DEVIL]), default_registry())
+
+
+def test_the_budget_is_reported_with_the_scenes_other_problems(tmp_path):
+    with pytest.raises(ConfigError) as err:
+        plan_scene(_scene(tmp_path, [GRASS.format(n=60), GRASS.format(n=60), "[entities.components.Camera]\nfov = 1.0\n"]),
+                   default_registry())
+    assert {p.key for p in err.value.problems} == {"entities", "entities[2].components.Camera.fov"}

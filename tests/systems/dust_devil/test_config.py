@@ -118,7 +118,7 @@ def _scene(tmp_path, devil: str, cameras=("main", "top")) -> Path:
     configs.mkdir(parents=True)
     text = "[scene]\nname = \"t\"\n\n[[entities]]\nname = \"devil\"\n[entities.components.DustDevil]\n" + devil
     for name in cameras:
-        text += f"\n[[entities]]\nname = \"{name}\"\n[entities.components.Camera]\n"
+        text += f"\n[[entities]]\nname = \"{name}\"\n[entities.components.Transform]\n[entities.components.Camera]\n"
     path = configs / "s.toml"
     path.write_text(text, encoding="utf-8")
     return path
@@ -167,3 +167,35 @@ def test_a_failing_scene_check_is_a_warning_not_a_crash(tmp_path):
     registry.add_scene_check(lambda plan, text: 1 / 0)
     plan = plan_scene(_scene(tmp_path, "particle_count = 100\n"), registry)
     assert any("ZeroDivisionError" in w.message for w in plan.warnings)
+
+
+def test_a_camera_without_a_transform_cannot_be_dragged_in_so_it_is_warned(tmp_path, registry):
+    path = _scene(tmp_path, 'particle_count = 100\ndrag_camera = "top"\n', cameras=("main",))
+    text = path.read_text() + '\n[[entities]]\nname = "top"\n[entities.components.Camera]\n'
+    path.write_text(text)
+    [warning] = validate_file(path, registry).warnings
+    assert "no camera entity named 'top'" in warning.message
+
+
+def test_a_reload_that_adds_a_warning_shows_it_in_the_status_and_the_hud(tmp_path):
+    from engine.app import App
+    from engine.reload import HotReloader, ReloadStatus
+    from engine.render.frontend import create_headless_context
+    from engine.render.passes import HudFeature
+    from engine.render.renderer import Renderer
+
+    path = _scene(tmp_path, 'particle_count = 100\ndrag_camera = "top"\n')
+    app = App(path)
+    reloader = HotReloader(app)
+    status = app.world.resource(ReloadStatus)
+    assert status.warnings == []
+    path.write_text(path.read_text().replace('drag_camera = "top"', 'drag_camera = "topp"'))
+    assert reloader.poll() and status.errors == []
+    assert len(status.warnings) == 1 and "no camera entity named 'topp'" in status.warnings[0]
+    renderer = Renderer(app, create_headless_context(), 64, 48)
+    try:
+        hud = next(f for f in renderer.features if isinstance(f, HudFeature))
+        [item] = [i for i in hud.extract(app.world) if i[0] == "bottom_left"]
+        assert item[1][0].startswith("config warning") and "topp" in item[1][1]
+    finally:
+        renderer.release()

@@ -94,3 +94,17 @@ def test_a_length_of_interest_that_makes_most_cells_level_0_is_a_warning(tmp_pat
     assert bool(found) == warned
     if warned:
         assert "level 0" in found[0].message and "M triangles a frame" in found[0].message and found[0].line
+
+
+@pytest.mark.parametrize("camera, warned", [
+    (CAMERA + 'hide_features = ["grass_field"]\n', False),  # the only view does not draw the field
+    (CAMERA + "enabled = false\n", False),
+    ("", True),  # no camera: the renderer's default view
+])
+def test_the_level_0_warning_follows_the_views_that_draw_the_field(tmp_path, registry, camera, warned):
+    body = 'preset = "grass_field/paper"\ngrid_x = 40\ngrid_z = 40\nplants_per_cell = 40\nlength_of_interest = 100.0'
+    plan = plan_scene(write_scene(tmp_path, scene_text(body, camera, terrain=False)), registry)
+    found = [w for w in plan.warnings if w.key.endswith("GrassField.length_of_interest")]
+    assert bool(found) == warned
+    if warned:
+        assert "in 'the default view'" in found[0].message

@@ -195,3 +195,37 @@ def test_spin_and_speed_stay_finite_and_limited_whatever_a_script_gives_a_body(t
     assert np.linalg.norm(state.velocity) <= 1000.0 * (1 + 1e-12)
     water = app.world.query(WaterState)[0][1][0]
     assert np.isfinite(water.heights).all()
+
+
+def test_a_huge_force_or_torque_through_the_public_commands_keeps_the_body_within_its_limits(tmp_path):
+    """The limit applies before the position and rotation move (a force of 1e12 N moved a body 8e5 m in five
+    ticks; 1e200 N at an offset crashed the water with NaN), and after the pool's contacts."""
+    from systems.water_surface.api import apply_force
+
+    app = _app(tmp_path, _body("crate", (0.2, 0.2, -0.1), scale=(1.0, 0.3, 0.6), mass=100.0))
+    crate = _entity(app, "crate")
+    start = app.world.get(crate, Transform).position.copy()
+    for _ in range(6):
+        apply_force(app.world, crate, [1e12, 1e200, 3e11], point=app.world.get(crate, Transform).position + [0.3, 0, 0.1])
+        app.step(1)
+    t, state = app.world.get(crate, Transform), app.world.get(crate, RigidBodyState)
+    assert np.isfinite(t.position).all() and np.isfinite(t.rotation).all()
+    assert np.linalg.norm(t.position - start) <= 6 * 1000.0 / 60.0 * (1 + 1e-9)
+    assert np.linalg.norm(state.angular_velocity) <= 100.0 * (1 + 1e-12)
+
+
+def test_the_limit_scales_a_finite_velocity_too_long_to_square_instead_of_zeroing_it():
+    from systems.water_surface.bodies import _limit
+
+    out = _limit(np.array([[1e200, 0.0, -1e200], [np.inf, 0.0, 0.0], [3.0, 4.0, 0.0]]), np.array([10.0, 10.0, 10.0]))
+    assert out[0] == pytest.approx([10.0 / np.sqrt(2.0), 0.0, -10.0 / np.sqrt(2.0)])
+    assert (out[1] == 0.0).all() and (out[2] == [3.0, 4.0, 0.0]).all()
+
+
+def test_a_contact_cannot_leave_the_spin_above_its_limit(tmp_path):
+    app = _app(tmp_path, _body("crate", (0.2, -0.3, -0.1), rotation=(35.0, 10.0, 20.0), mass=900.0,
+                               velocity=[0.0, -5.0, 0.0], max_angular_speed=0.5))
+    crate = _entity(app, "crate")
+    for _ in range(30):
+        app.step(1)
+        assert np.linalg.norm(app.world.get(crate, RigidBodyState).angular_velocity) <= 0.5 * (1 + 1e-12)
