@@ -214,8 +214,8 @@ def integrate(bodies: BodyArrays, dt: float, water: tuple | None, linear_drag: f
     decay_v = np.exp(-bodies.linear_damping * h)[:, None]
     decay_w = np.exp(-bodies.angular_damping * h)[:, None]
     weight = bodies.mass * bodies.gravity
+    limit_speeds(bodies)  # what impulses and scripts gave; each sub-step limits what it adds
     for _ in range(n):  # sub-steps, vectorized over bodies
-        limit_speeds(bodies)
         rot = quat_to_matrix(bodies.rotation)
         force = bodies.force.copy()
         force[:, 1] -= weight
