@@ -115,24 +115,32 @@ class DustDevilConfig(ConfigModel):
             raise ValueError(f"min {value[0]} must not exceed max {value[1]}")
         return value
 
+    def _pbvr_points(self) -> int:
+        return self.particle_count * self.sub_particles * self.repeats
+
+    def _point_fill(self) -> float:
+        return (self._pbvr_points() if self.pbvr else self.particle_count) * self.point_size ** 2
+
+    def _prewarm_work(self, fixed_dt: float) -> int:
+        return self.particle_count * self.substeps * round(self.prewarm_time / fixed_dt)
+
     def scene_budgets(self, fixed_dt: float) -> list[tuple[str, float, float]]:
         """(what, cost, limit) that every entity of a scene shares (engine.scene: the sum of each is capped)."""
-        points = self.particle_count * self.sub_particles * self.repeats if self.pbvr else 0
-        fill = (points if self.pbvr else self.particle_count) * self.point_size ** 2
-        return [("PBVR points a frame (particle_count * sub_particles * repeats)", points, MAX_PBVR_POINTS),
-                ("point pixels a frame (points * point_size²)", fill, MAX_POINT_FILL),
+        return [("PBVR points a frame (particle_count * sub_particles * repeats)",
+                 self._pbvr_points() if self.pbvr else 0, MAX_PBVR_POINTS),
+                ("point pixels a frame (points * point_size²)", self._point_fill(), MAX_POINT_FILL),
                 ("prewarm particle steps (particle_count * substeps * prewarm_time / fixed_dt)",
-                 self.particle_count * self.substeps * round(self.prewarm_time / fixed_dt), MAX_PREWARM_WORK)]
+                 self._prewarm_work(fixed_dt), MAX_PREWARM_WORK)]
 
     @model_validator(mode="after")
     def _point_budget(self) -> DustDevilConfig:
         """PBVR draws particle_count · sub_particles · repeats points a frame: each bound alone is sane, all three
         at their maxima would be 200 million points, minutes a frame on a software rasteriser."""
-        points = self.particle_count * self.sub_particles * self.repeats
+        points = self._pbvr_points()
         if self.pbvr and points > MAX_PBVR_POINTS:
             raise ValueError(f"particle_count * sub_particles * repeats = {points} points a frame exceeds "
                              f"{MAX_PBVR_POINTS}; lower particle_count, sub_particles or repeats")
-        fill = (points if self.pbvr else self.particle_count) * self.point_size ** 2
+        fill = self._point_fill()
         if fill > MAX_POINT_FILL:
             raise ValueError(f"{'particle_count * sub_particles * repeats' if self.pbvr else 'particle_count'} * "
                              f"point_size² = {fill:.4g} pixels a frame exceeds {MAX_POINT_FILL:.4g}; lower "
@@ -145,7 +153,7 @@ class DustDevilConfig(ConfigModel):
         the smallest fixed_dt and the largest counts that was hours before the first frame."""
         dt = (info.context or {}).get("fixed_dt") if info is not None else None
         dt = float(dt) if dt else 1.0 / 60.0
-        work = self.particle_count * self.substeps * round(self.prewarm_time / dt)
+        work = self._prewarm_work(dt)
         if work > MAX_PREWARM_WORK:
             raise ValueError(f"particle_count * substeps * (prewarm_time / fixed_dt = {round(self.prewarm_time / dt)}"
                              f" steps) = {work} particle steps before the first frame exceeds {MAX_PREWARM_WORK}; "

@@ -223,15 +223,17 @@ class EnergyWaveEmitter(ConfigModel):
 
     def scene_budgets(self, fixed_dt: float) -> list[tuple[str, float, float]]:
         """(what, cost, limit) that every entity of a scene shares (engine.scene: the sum of each is capped)."""
-        return [("sprites (max_particles * max(trail_textures, splash_samples))",
-                 self.max_particles * max(self.trail_textures, self.splash_samples), MAX_SPRITES)]
+        return [("sprites (max_particles * max(trail_textures, splash_samples))", self._sprites(), MAX_SPRITES)]
+
+    def _sprites(self) -> int:
+        return self.max_particles * max(self.trail_textures, self.splash_samples)
 
     @model_validator(mode="after")
     def _sprite_budget(self) -> EnergyWaveEmitter:
         """Every particle may become a trail of M sprites or a bar of N: the sprite buffers hold max_particles ·
         max(M, N) billboards. Each bound alone is sane; together at their maxima they were 64 million sprites
         (gigabytes of index buffer, a minute a frame)."""
-        sprites = self.max_particles * max(self.trail_textures, self.splash_samples)
+        sprites = self._sprites()
         if sprites > MAX_SPRITES:
             raise ValueError(f"max_particles * max(trail_textures, splash_samples) = {sprites} sprites exceeds "
                              f"{MAX_SPRITES}; lower max_particles, trail_textures or splash_samples")

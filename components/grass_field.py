@@ -186,12 +186,14 @@ class GrassFieldConfig(ConfigModel):
 
     def scene_budgets(self, fixed_dt: float) -> list[tuple[str, float, float]]:
         """(what, cost, limit) that every entity of a scene shares (engine.scene: the sum of each is capped)."""
-        return [("plants (grid_x * grid_z * plants_per_cell)", self.grid_x * self.grid_z * self.plants_per_cell,
-                 MAX_PLANTS)]
+        return [("plants (grid_x * grid_z * plants_per_cell)", self._plants(), MAX_PLANTS)]
+
+    def _plants(self) -> int:
+        return self.grid_x * self.grid_z * self.plants_per_cell
 
     @model_validator(mode="after")
     def _plant_budget(self) -> GrassFieldConfig:
-        plants = self.grid_x * self.grid_z * self.plants_per_cell
+        plants = self._plants()
         if plants > MAX_PLANTS:
             raise ValueError(f"grid_x * grid_z * plants_per_cell = {plants} plants exceeds {MAX_PLANTS}; "
                              "lower grid_x, grid_z or plants_per_cell")

@@ -161,10 +161,12 @@ class ToonSmokeVolumeConfig(ConfigModel):
 
     def scene_budgets(self, fixed_dt: float) -> list[tuple[str, float, float]]:
         """(what, cost, limit) that every entity of a scene shares (engine.scene: the sum of each is capped)."""
-        sim = math.prod(self.simulation_resolution)
         return [("smoke solver work (simulation cells * (diffusion_iterations + pressure_iterations))",
-                 sim * (self.diffusion_iterations + self.pressure_iterations), MAX_SOLVER_WORK),
+                 self._solver_work(), MAX_SOLVER_WORK),
                 ("smoke display cells", math.prod(self.display_resolution), MAX_DISPLAY_CELLS)]
+
+    def _solver_work(self) -> int:
+        return math.prod(self.simulation_resolution) * (self.diffusion_iterations + self.pressure_iterations)
 
     @model_validator(mode="after")
     def _check_consistency(self) -> ToonSmokeVolumeConfig:
@@ -184,8 +186,7 @@ class ToonSmokeVolumeConfig(ConfigModel):
                              f"{len(self.ramp_colors)}: give one start position per colour")
         if self.ramp_positions[0] != 0.0 or any(b <= a for a, b in zip(self.ramp_positions, self.ramp_positions[1:])):
             raise ValueError(f"ramp_positions {list(self.ramp_positions)} must start at 0 and increase strictly")
-        sim_cells, display_cells = math.prod(sim), math.prod(disp)
-        work = sim_cells * (self.diffusion_iterations + self.pressure_iterations)
+        work, display_cells = self._solver_work(), math.prod(disp)
         if work > MAX_SOLVER_WORK:
             raise ValueError(f"simulation_resolution {list(sim)} × (diffusion_iterations + pressure_iterations) = "
                              f"{work} cell sweeps a tick exceeds {MAX_SOLVER_WORK}; lower the resolution or the "

@@ -135,8 +135,9 @@ def check_drag_cameras(plan, text: str) -> list:
             how = ("" if "drag_camera" in cfg.model_fields_set else
                    " (the default; set drag_camera = \"\" to turn mouse dragging off)")
             found.append(Problem(str(plan.file), format_key(key),
-                                 f"no camera entity named '{cfg.drag_camera}' (with Camera and Transform) in this scene{how}; mouse drags of "
-                                 f"this dust devil will do nothing unless a script spawns it (cameras: {listed})",
+                                 f"no camera entity named '{cfg.drag_camera}' (with Camera and Transform) in this "
+                                 f"scene{how}; mouse drags of this dust devil will do nothing unless a script "
+                                 f"spawns it (cameras: {listed})",
                                  None, suggest(cfg.drag_camera, cameras), locate_line(text, key)))
     return found
 
