@@ -81,6 +81,7 @@ def autoplay(app: App, args: argparse.Namespace) -> int:
         state = app.world.try_resource(GameState)
         done = state is not None and state.phase != "playing"
         if renderer is not None and (tick % args.screenshot_every == 0 or done):
+            renderer.reset_frame_clock()  # frames hundreds of ticks apart: no frame rate to show
             app.render_frame()
             renderer.save_screenshot(args.screenshots / f"frame_{tick:05d}.png")
             shots += 1

@@ -448,6 +448,13 @@ class Renderer:
                 feature.add_passes(timed, screen, data[index])
         return graph
 
+    def reset_frame_clock(self) -> None:
+        """Forget the last frame's time: the next frame does not count towards :attr:`fps` (the HUD shows
+        ``--`` until two frames in a row are drawn).  For callers that draw frames far apart, such as a headless
+        run taking a screenshot every few hundred ticks, whose frame rate would otherwise read as 0.3 fps."""
+        self.fps = 0.0
+        self._last_draw = None
+
     def draw(self, overlap: Callable[[], None] | None = None) -> None:
         """Render stage: declare, compile (cached) and execute the graph; present in a window.
 

@@ -356,3 +356,19 @@ def test_a_view_without_the_sky_still_clears_its_colour():
     assert np.ptp(horizon, axis=0).max() <= 2, "the inset's background is not one flat colour"
     assert horizon.mean() > 20, "the inset's background was never cleared (black)"
     assert np.array_equal(frames[0][48:64, 0:48], frames[1][48:64, 0:48])
+
+
+def test_reset_frame_clock_keeps_frames_drawn_far_apart_out_of_the_frame_rate():
+    app = App(SCENE)
+    renderer = make_renderer(app, 96, 64)
+    app.render_frame()
+    app.render_frame()
+    assert renderer.fps > 0.0  # two frames in a row: a frame rate
+    renderer.reset_frame_clock()
+    assert renderer.fps == 0.0
+    app.render_frame()  # the first frame after the reset has no previous frame to measure against
+    assert renderer.fps == 0.0
+    app.render_frame()
+    assert renderer.fps > 0.0
+    renderer.release()
+    app.renderer = None
