@@ -12,6 +12,8 @@ Script commands (``ctx.call(name, ...)``; ``emitter=`` addresses another entity 
 
 from __future__ import annotations
 
+import math
+
 from typing import Any
 
 from components.energy_wave import PATTERN_PARAMETERS, EnergyWaveEmitter, EnergyWaveState, build_energy_wave
@@ -39,17 +41,15 @@ def fire(world: World, entity: int, duration: float | None = None, count: int | 
          emitter: int | None = None) -> None:
     """Command ``energy_wave.fire``: start a burst (see the module docstring)."""
     _, cfg, state = _target(world, entity, emitter)
-    if count is not None:
-        if count < 0:
-            raise ValueError(f"energy_wave.fire: count must be >= 0, got {count}")
-        seconds = float(duration) if duration is not None else cfg.burst_duration
-        state.burst_rate = count / seconds
-        state.burst_time_left = seconds
-        return
     seconds = float(duration) if duration is not None else cfg.burst_duration
-    if not seconds > 0.0:
-        raise ValueError(f"energy_wave.fire: duration must be > 0, got {duration}")
-    state.burst_rate = cfg.emission_rate
+    if not (math.isfinite(seconds) and seconds > 0.0):
+        raise ValueError(f"energy_wave.fire: duration must be a finite number > 0, got {duration}")
+    if count is not None:
+        if not (math.isfinite(float(count)) and count >= 0):
+            raise ValueError(f"energy_wave.fire: count must be a finite number >= 0, got {count}")
+        state.burst_rate = float(count) / seconds
+    else:
+        state.burst_rate = cfg.emission_rate
     state.burst_time_left = seconds
 
 

@@ -4,7 +4,8 @@ headless).
 Each record is three RGBA texels: (position, alpha), (hit point P0, unused), (unit travel direction d, unused).
 Records are grouped by how the GPU expands them (section 3.4): single sprites (beam particles and grains),
 continuous trails of M sprites (eq. 3.7) and bars of N sprites (eqs. 3.8, 3.9). The vertex shader expands each
-record into its sprites from ``gl_InstanceID``, so the CPU work here is O(particles) whatever M and N are.
+record into its sprites from ``gl_VertexID`` (no instancing), so the CPU work here is O(particles) whatever M and
+N are.
 """
 
 from __future__ import annotations

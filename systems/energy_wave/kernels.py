@@ -228,7 +228,9 @@ def gather_in_box(position, pattern, count, extra, lo, hi, out) -> int:  # pragm
 @kernel
 def advance_particles(position, velocity, age, pattern, count, dt, hold_irregular):  # pragma: no cover
     """One pass over an emitter's live particles at the start of a step: age += dt; the beam particles
-    (``pattern`` < 0) listed with their positions before the move (their swept segments start there); every
+    (``pattern`` < 0) listed with their positions before the move (their swept segments start there; for one
+    emitted during the last step, younger than ``dt``, its birth point on the emitter, x - age·v, so that the
+    stretch it was placed ahead of the emitter is swept too); every
     particle moved x += v·dt except, when ``hold_irregular``, the irregular ones (``pattern`` >= 0 and odd), which
     are listed instead: eq. 3.5 first steers them from their unmoved positions (then :func:`move_rows`).
 
@@ -239,13 +241,15 @@ def advance_particles(position, velocity, age, pattern, count, dt, hold_irregula
     b = 0
     r = 0
     for i in range(count):
+        born = age[i] < dt  # emitted during the last step, at the emitter, and not swept since
+        back = age[i] if born else 0.0
         age[i] += dt
         code = pattern[i]
         if code < 0:
             beam[b] = i
-            start[b, 0] = position[i, 0]
-            start[b, 1] = position[i, 1]
-            start[b, 2] = position[i, 2]
+            start[b, 0] = position[i, 0] - back * velocity[i, 0]
+            start[b, 1] = position[i, 1] - back * velocity[i, 1]
+            start[b, 2] = position[i, 2] - back * velocity[i, 2]
             b += 1
         elif hold_irregular and code & 1 == 1:
             irregular[r] = i

@@ -166,15 +166,15 @@ def impose_velocity(geo: Geometry, state: ToonSmokeState, centre, radius: float,
 
 def velocity_step(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, dt: float, up_local: np.ndarray,
                   rng: np.random.Generator | None = None) -> None:
-    """Stam 1999 up to the projection: self-advect u, add buoyancy (β·T − α·ρ along up) and vorticity
-    confinement, impose the sources, diffuse (ν), and zero the normal velocity on walls and solids."""
+    """Stam 1999 up to the projection, in the paper's order (seeds/002 §3.1: external forces, advection,
+    diffusion, projection): add buoyancy (β·T − α·ρ along up) and vorticity confinement, impose the sources,
+    self-advect u, diffuse (ν), and zero the normal velocity on walls and solids."""
     geo = _geometry(cfg, state)
     h = geo.h
-    u, v, w = fluid.advect_velocity(geo, state.u, state.v, state.w, dt)
-    state.u, state.v, state.w = u, v, w
-    fluid.body_forces(u, v, w, state.temperature, state.density, cfg.buoyancy, cfg.smoke_weight, up_local,
-                      cfg.vorticity_confinement, h, dt)
+    fluid.body_forces(state.u, state.v, state.w, state.temperature, state.density, cfg.buoyancy, cfg.smoke_weight,
+                      up_local, cfg.vorticity_confinement, h, dt)
     apply_sources(cfg, state, dt, rng)
+    state.u, state.v, state.w = fluid.advect_velocity(geo, state.u, state.v, state.w, dt)
     if cfg.viscosity > 0.0:
         state.u, state.v, state.w = (fluid.diffuse(c, cfg.viscosity, dt, h, cfg.diffusion_iterations)
                                      for c in (state.u, state.v, state.w))
@@ -362,7 +362,7 @@ def _up_local(ctx: StepContext) -> np.ndarray:
 # advance the state; the display phases derive the display grid from it (see the module docstring).
 SIMULATION_PHASES: tuple[tuple[str, Callable[[StepContext], None]], ...] = (
     ("obstacles", lambda c: update_obstacles(c.world, c.entity, c.transform, c.cfg, c.state)),
-    ("velocity (advect, forces, sources)", lambda c: velocity_step(c.cfg, c.state, c.dt, _up_local(c), c.rng)),
+    ("velocity (forces, sources, advect)", lambda c: velocity_step(c.cfg, c.state, c.dt, _up_local(c), c.rng)),
     ("pressure projection (MGPCG)", lambda c: projection_step(c.cfg, c.state)),
     ("density + temperature", lambda c: scalar_step(c.cfg, c.state, c.dt)),
     ("particles", lambda c: advect_particles(c.cfg, c.state, c.dt, c.rng)),

@@ -60,6 +60,12 @@ def test_fire_emits_rate_times_duration():
     assert abs(st.emitted - 227) <= 1
     with pytest.raises(ValueError):
         fire(app.world, entity, duration=0.0)
+    for bad in ({"count": 10, "duration": 0.0}, {"count": 10, "duration": -1.0}, {"count": 10, "duration": float("nan")},
+                {"count": float("inf")}, {"count": -1}, {"duration": float("inf")}):
+        with pytest.raises(ValueError):  # a burst with a count checks its duration too (10 / 0 raised before)
+            fire(app.world, entity, **bad)
+    app.step(5)
+    assert abs(st.emitted - 227) <= 1  # the refused bursts changed nothing
 
 
 def test_set_emitting_switches_continuous_emission():

@@ -440,3 +440,24 @@ def test_a_target_that_moves_is_hit_where_it_is_now():
     app.world.get(box, Transform).position[2] = -4.0  # in place: the same array object
     later = [h for tick in _events(app, EnergyWaveHit, 60)[30:] for h in tick]
     assert later and all(abs(h.point[2] + 3.9) < 1e-6 for h in later)
+
+
+def test_a_fast_beam_hits_a_thin_wall_just_ahead_of_the_emitter():
+    """A new particle is placed up to beam_speed·dt ahead of the emitter (0.75 m at 45 m/s); the stretch between
+    the emitter and that point is swept in its first step, so a wall 0.3 m ahead stops the whole beam."""
+    from tests.systems.energy_wave.helpers import add_box, add_emitter, live, make_app
+
+    app = make_app(1)
+    add_box(app, (0.0, 0.0, -0.35), (2.0, 2.0, 0.05))  # faces at z = -0.30 and -0.40; the beam fires along -z
+    _, cfg, st = add_emitter(app, beam_speed=45.0)
+    app.step(30)
+    pattern, position, age = live(st, "pattern"), live(st, "position"), live(st, "age")
+    hit_point = live(st, "hit_point")
+    dt = app.clock.dt
+    splashes = pattern >= 0
+    assert splashes.sum() > 100
+    assert np.all(hit_point[splashes, 2] >= -0.30 - 1e-9)  # every hit on the wall's near face
+    beam = pattern < 0
+    assert np.all(position[beam & (age >= dt), 2] >= -0.30)  # swept once: none went through
+    # only the particles of the last step, not swept yet, may lie up to beam_speed·dt ahead (the wall hides them)
+    assert np.all(position[beam, 2] >= -45.0 * dt - cfg.beam_radius)
