@@ -21,6 +21,7 @@ from typing import Any
 
 from engine.builtin import InputSource
 from engine.config import ConfigError, Problem
+from engine.input import InputQueue, InputState
 from engine.registry import Registry, RegistryError, default_registry
 from engine.scene import SceneConfig, ScenePlan, plan_scene, read_scene, spawn_plan
 from engine.schedule import FRAME_STAGES, TICK_STAGES, FixedClock, Stage
@@ -137,6 +138,7 @@ class App:
     def restart(self) -> None:
         """Rebuild the world from the current scene plan (same seed): the game's R key."""
         renderer, source = self.renderer, self.world.try_resource(InputSource)
+        queue, held = self.world.try_resource(InputQueue), self.world.try_resource(InputState)
         try:
             self._new_world()
         except ConfigError as exc:  # an asset changed on disk since the scene loaded: keep playing this world
@@ -147,6 +149,12 @@ class App:
         self.restart_errors = []
         if source is not None:
             self.world.insert_resource(source)
+        if queue is not None:  # the window pushes its events into this object: it stays the world's queue
+            self.world.insert_resource(queue)
+        fresh = self.world.try_resource(InputState)
+        if held is not None and fresh is not None:  # keys and buttons still held stay held (not pressed again)
+            fresh.keys_down = set(held.keys_down)
+            fresh.mouse = held.mouse
         self.started = False
         self.renderer = renderer
 

@@ -103,6 +103,16 @@ class ScriptContext:
         return self.world.tick
 
     @property
+    def paused(self) -> bool:
+        """True while the game is paused (``engine.pause``): the simulation stages are skipped, scripts still run
+        (menus, the pause key). A script that advances game time (a countdown, an animation, a spawner) should
+        wait while this is set, as the simulation does."""
+        from engine.app import TimeControl
+
+        control = self.world.try_resource(TimeControl)
+        return bool(control is not None and control.paused)
+
+    @property
     def window_size(self) -> tuple[int, int]:
         """The window's (or the headless target's) size in pixels, as the renderer draws it; the scene's
         ``[render]`` size when nothing renders.  Mouse positions are pixels of it, origin bottom-left."""

@@ -24,6 +24,8 @@ class Spin(Script):
         axis: Vec3 = Field((0.0, 1.0, 0.0), description="Rotation axis (world).")
 
     def on_update(self, dt: float) -> None:
+        if self.ctx.paused:
+            return
         t = self.ctx.get(Transform)
         step = quat_from_axis_angle(np.array(self.params.axis), math.radians(self.params.speed) * dt)
         t.rotation = quat_normalize(quat_mul(step, t.rotation))
@@ -43,6 +45,8 @@ class Bob(Script):
         self.time = 0.0
 
     def on_update(self, dt: float) -> None:
+        if self.ctx.paused:
+            return
         self.time += dt
         y = self.base_y + self.params.amplitude * math.sin(2.0 * math.pi * self.params.frequency * self.time
                                                            + self.phase)
@@ -57,6 +61,8 @@ class WasdMover(Script):
         speed: float = Field(4.0, ge=0.0, le=100.0, description="Metres per second.")
 
     def on_update(self, dt: float) -> None:
+        if self.ctx.paused:
+            return
         inp = self.ctx.input
         move = np.array([inp.is_down("d") - inp.is_down("a"), 0.0, inp.is_down("s") - inp.is_down("w")], float)
         if move.any():
@@ -75,13 +81,17 @@ class Spawner(Script):
 
     def on_start(self) -> None:
         self.timer = 0.0
+        self.clock = 0.0  # game seconds this script has run, pauses left out (the cubes' lifetimes count these)
         self.alive: list[tuple[int, float]] = []
 
     def on_update(self, dt: float) -> None:
         from engine.builtin import Name
 
+        if self.ctx.paused:
+            return
         self.timer += dt
-        now = self.ctx.tick * dt
+        self.clock += dt
+        now = self.clock
         expired = [e for e, t in self.alive if t <= now]
         for entity in expired:
             self.ctx.despawn(entity)
@@ -116,6 +126,8 @@ class Lifetime(Script):
         self.left = self.params.seconds
 
     def on_update(self, dt: float) -> None:
+        if self.ctx.paused:  # paused game: the effect it removes is frozen too
+            return
         self.left -= dt
         if self.left <= 0.0:
             self.ctx.despawn()

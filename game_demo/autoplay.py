@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from components.energy_wave import EnergyWaveEmitter
 from engine.app import App
 from engine.exact import matmul, matvec
 from engine.input import InputEvent, InputQueue
@@ -24,24 +25,48 @@ from engine.render.components import Camera, camera_matrices, window_size
 from engine.script import Scripts
 from engine.spatial import Transform
 from game_demo.scripts.common import GameState, Target, find_named_world
+from game_demo.scripts.chaser import DustDevilChaser
 from game_demo.scripts.player import Player
+from game_demo.scripts.rules import GameRules
+
+
+def script_params(world, entity_name: str, script_cls):
+    """The parameters of ``script_cls`` on the entity named ``entity_name`` as the scene configured them (the
+    script's defaults when the entity or the script is missing)."""
+    entity = find_named_world(world, entity_name)
+    scripts = None if entity is None else world.try_get(entity, Scripts)
+    for slot in (scripts.slots if scripts is not None else []):
+        if slot.name == script_cls.script_name:
+            return slot.script.params
+    return script_cls.Params()
 
 
 def player_params(world) -> Player.Params:
     """The ``demo.player`` script's parameters as the scene configured them (its defaults without the script):
     the autoplay aims and fires with the look sensitivity and fire cooldown the player script applies."""
+    return script_params(world, "player", Player)
+
+
+def fire_range(world, share: float = 0.85) -> float:
+    """Metres within which the pilot fires: ``share`` of the player's beam range (its EnergyWaveEmitter's
+    ``beam_range``, as the scene or its preset sets it), so that a retuned beam keeps the pilot in reach."""
     player = find_named_world(world, "player")
-    scripts = None if player is None else world.try_get(player, Scripts)
-    for slot in (scripts.slots if scripts is not None else []):
-        if slot.name == Player.script_name:
-            return slot.script.params
-    return Player.Params()
+    emitter = None if player is None else world.try_get(player, EnergyWaveEmitter)
+    return share * (emitter.beam_range if emitter is not None else EnergyWaveEmitter.model_fields["beam_range"].default)
+
+
+def danger_radius(world, reaction_seconds: float = 2.5) -> float:
+    """Metres at which the pilot drags the dust devil away: the rules' ``lose_radius`` plus the distance the
+    devil drifts (the chaser script's ``speed``) in ``reaction_seconds``."""
+    rules = script_params(world, "game", GameRules)
+    chaser = script_params(world, "dust_devil", DustDevilChaser)
+    return rules.lose_radius + chaser.speed * reaction_seconds
 
 
 @dataclass
 class AutoPilot:
-    fire_range: float = 34.0
-    danger_radius: float = 10.0
+    fire_range: float | None = None  # metres; None: from the player's beam range (see fire_range())
+    danger_radius: float | None = None  # metres; None: from the rules and the chaser (see danger_radius())
     drag_distance: float = 22.0
     max_turn_px: float = 60.0
     window: tuple[int, int] | None = None  # pixels; None: the engine's window size (the renderer's when one is
@@ -95,7 +120,8 @@ class AutoPilot:
         devil = find_named_world(world, "dust_devil")
         if devil is not None:
             d = world.get(devil, Transform).position
-            if math.hypot(d[0] - p.position[0], d[2] - p.position[2]) < self.danger_radius:
+            danger = self.danger_radius if self.danger_radius is not None else danger_radius(world)
+            if math.hypot(d[0] - p.position[0], d[2] - p.position[2]) < danger:
                 if self._plan_drag(world, p.position, d, out):
                     return out
         self._press("right", out)
@@ -123,14 +149,15 @@ class AutoPilot:
         py = float(np.clip(math.degrees(err_pitch) / sensitivity, -self.max_turn_px, self.max_turn_px))
         if abs(px) > 0.01 or abs(py) > 0.01:
             self._turn(px, py, out)
-        if dist > self.fire_range * 0.8:
+        reach = self.fire_range if self.fire_range is not None else fire_range(world)
+        if dist > reach * 0.8:
             self._press("w", out)
         else:
             self._release("w", out)
         self.fire_cooldown = max(0, self.fire_cooldown - 1)
         if "space" in self.holding:
             self._release("space", out)
-        elif abs(math.degrees(err_yaw)) < 2.5 and dist < self.fire_range and self.fire_cooldown == 0:
+        elif abs(math.degrees(err_yaw)) < 2.5 and dist < reach and self.fire_cooldown == 0:
             self._press("space", out)
             # the player's cooldown in ticks, + 1 for its float countdown's rounding
             self.fire_cooldown = math.ceil(params.fire_cooldown / world.resource(App).dt - 1e-9) + 1

@@ -40,6 +40,9 @@ class Player(Script):
                                    description="Metres kept between the player and the terrain's edge.")
         camera_look_down: float = Field(8.0, ge=-45.0, le=45.0,
                                         description="Degrees the follow camera looks below the player's aim.")
+        start_pattern: str = Field("A", pattern="^[A-H]$",
+                                   description="Beam pattern (A-H, the paper's figure 3.1) set when the run starts; "
+                                               "the HUD shows it. Keys 1-8 pick another.")
         area_half_size: float = Field(50.0, gt=0.0, le=10000.0,
                                       description="Half the side of the playable square (metres) when the scene "
                                                   "has no terrain (with one, the terrain's extent).")
@@ -51,6 +54,8 @@ class Player(Script):
         state = game_state(self.ctx)
         state.top_view = "minimap"
         self._apply_viewports(state)
+        self.ctx.call("energy_wave.set_pattern", pattern=self.params.start_pattern)  # the beam is what the HUD says
+        state.pattern = self.params.start_pattern
 
     # -------------------------------------------------------------- helpers
     def _top_rect(self) -> tuple[float, float, float, float]:

@@ -70,7 +70,8 @@ class GameRules(Script):
         return float(np.hypot(a[0] - b[0], a[2] - b[2]))
 
     def _hud(self, state) -> None:
-        lines = [f"targets left {state.targets_left}/{state.targets_total}",
+        count = f"{state.targets_left}/{state.targets_total}" if state.targets_total else "-"  # none placed yet
+        lines = [f"targets left {count}",
                  f"time {state.time_left:5.1f} s", f"pattern {state.pattern}", "F1 help"]
         center = ""
         if state.phase == "won":

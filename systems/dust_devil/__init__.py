@@ -145,13 +145,18 @@ def check_drag_cameras(plan, text: str) -> list:
 # ------------------------------------------------------------------------------------------------- systems
 def mouse_drag_system(world, dt: float) -> None:
     """Input stage: press in the top view picks the ground, moving the mouse moves the field by the picked
-    ground distance (horizontal), release ends the drag (section 4)."""
+    ground distance (horizontal), release ends the drag (section 4).  A paused game (``engine.pause``) freezes
+    the dust devil with the rest of the simulation: no drag starts or goes on while it is paused (a drag in
+    progress ends; the button must be pressed again after the pause)."""
+    from engine.app import TimeControl
     from engine.input import InputState
 
     inp = world.resource(InputState)
+    control = world.try_resource(TimeControl)
+    paused = control is not None and control.paused
     for _, (transform, cfg, state) in world.query(Transform, DustDevilConfig, DustDevilState):
         button = f"mouse_{cfg.drag_button}"
-        if not cfg.drag_camera or not inp.is_down(button):
+        if paused or not cfg.drag_camera or not inp.is_down(button):
             state.mouse_dragging = False
             continue
         if not state.mouse_dragging and not inp.was_pressed(button):

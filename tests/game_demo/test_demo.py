@@ -118,3 +118,109 @@ def test_pause_stops_the_timer_and_the_dust_devil():
     app.step(60)
     assert state.time_left == time_left
     assert np.array_equal(world.get(devil, Transform).position, before)
+
+
+def _drag_devil(app: App, offset=(-12.0, 8.0)) -> np.ndarray:
+    """Drag the dust devil in the top view by ``offset`` metres (x, z) with injected mouse events; returns how far
+    it moved."""
+    world = app.world
+    devil = find_named_world(world, "dust_devil")
+    start = world.get(devil, Transform).position.copy()
+    pilot = AutoPilot(window=(app.config.render.width, app.config.render.height))
+    top = find_named_world(world, "top_camera")
+    p0 = pilot._to_pixels(world, top, start)
+    p1 = pilot._to_pixels(world, top, start + np.array([offset[0], 0.0, offset[1]]))
+    queue = world.resource(InputQueue)
+    queue.push(InputEvent("mouse_move", x=p0[0], y=p0[1]))
+    queue.push(InputEvent("button_down", "left", x=p0[0], y=p0[1]))
+    app.step(1)
+    for i in range(1, 5):
+        x, y = p0[0] + (p1[0] - p0[0]) * i / 4, p0[1] + (p1[1] - p0[1]) * i / 4
+        queue.push(InputEvent("mouse_move", x=x, y=y, dx=(p1[0] - p0[0]) / 4, dy=(p1[1] - p0[1]) / 4))
+        app.step(1)
+    queue.push(InputEvent("button_up", "left", x=p1[0], y=p1[1]))
+    app.step(1)
+    return world.get(devil, Transform).position - start
+
+
+def test_a_paused_game_cannot_drag_the_dust_devil():
+    app = App(SCENE)
+    app.step(1)
+    queue = app.world.resource(InputQueue)
+    queue.push(InputEvent("key_down", "escape"))
+    queue.push(InputEvent("key_up", "escape"))
+    app.step(1)
+    assert app.world.resource(GameState).paused
+    assert np.array_equal(_drag_devil(app), np.zeros(3))  # moved 20 m while paused before
+    queue.push(InputEvent("key_down", "escape"))
+    queue.push(InputEvent("key_up", "escape"))
+    app.step(1)
+    assert np.hypot(*_drag_devil(app)[[0, 2]]) > 10.0  # playing again: the same drag moves it
+
+
+def test_restart_keeps_the_window_input_queue_and_the_keys_held():
+    """The window pushes its events into the InputQueue it got at start-up: after R it must still be the world's
+    queue, and a key held through the restart keeps counting as held."""
+    app = App(SCENE)
+    app.step(2)
+    queue = app.world.resource(InputQueue)  # what the window holds on to
+    queue.push(InputEvent("key_down", "w"))
+    app.step(10)
+    queue.push(InputEvent("key_down", "r"))
+    app.step(1)  # restarts at the end of this tick
+    queue.push(InputEvent("key_up", "r"))
+    assert app.world.resource(InputQueue) is queue
+    player = find_named_world(app.world, "player")
+    before = app.world.get(player, Transform).position.copy()
+    app.step(30)
+    moved = app.world.get(player, Transform).position - before
+    assert np.hypot(moved[0], moved[2]) > 2.0  # W still held: the player walks (stood still before)
+    queue.push(InputEvent("key_down", "escape"))  # and the next key still reaches the game
+    app.step(1)
+    assert app.world.resource(GameState).paused
+
+
+def test_the_smoke_puff_waits_while_the_game_is_paused():
+    """The puff's lifetime script counts game time: a pause freezes it with the smoke simulation."""
+    from engine.builtin import Name
+    from engine.prefab import PrefabLibrary
+
+    app = App(SCENE)
+    app.step(2)
+    puff = PrefabLibrary.of(app).spawn(app.world, "smoke_puff", np.array([0.0, 1.0, 0.0]), ())
+    app.step(1)
+    assert app.world.try_get(puff, Name) is not None
+    app.world.resource(InputQueue).push(InputEvent("key_down", "escape"))
+    app.step(1)
+    assert app.world.resource(GameState).paused
+    app.step(int(5.0 / app.dt))  # longer than the puff's 3.5 s
+    assert app.world.try_get(puff, Name) is not None  # removed during the pause before
+    app.world.resource(InputQueue).push(InputEvent("key_up", "escape"))
+    app.world.resource(InputQueue).push(InputEvent("key_down", "escape"))
+    app.step(int(4.0 / app.dt))
+    assert not app.world.resource(GameState).paused
+    assert app.world.try_get(puff, Name) is None
+
+
+def test_the_hud_pattern_is_the_beam_pattern_from_the_start():
+    from components.energy_wave import PATTERN_PARAMETERS, EnergyWaveEmitter
+
+    app = App(SCENE)
+    app.step(2)
+    state = app.world.resource(GameState)
+    emitter = app.world.get(find_named_world(app.world, "player"), EnergyWaveEmitter)
+    for key, value in PATTERN_PARAMETERS[state.pattern].items():
+        assert getattr(emitter, key) == value  # the preset's A/E mix before, with the HUD saying "A"
+
+
+def test_the_autoplay_reach_follows_the_scene_tuning():
+    from game_demo.autoplay import danger_radius, fire_range
+    from systems.energy_wave import configure
+
+    app = App(SCENE)
+    app.step(1)
+    world = app.world
+    assert fire_range(world) == pytest.approx(0.85 * 40.0)
+    assert danger_radius(world) == pytest.approx(3.0 + 3.0 * 2.5)  # lose_radius + chaser speed x 2.5 s
+    configure(world, find_named_world(world, "player"), beam_range=22.0)
+    assert fire_range(world) == pytest.approx(0.85 * 22.0)
