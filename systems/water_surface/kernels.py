@@ -107,10 +107,12 @@ def pairwise_sum(a, start, n):
 @kernel
 def water_mean(field, solid):
     """Mean height of the water vertices: (Σ field − Σ field[solid]) / (size − len(solid)), each sum as numpy's
-    ``np.add.reduce`` takes it (``surface._water_mean``); ``solid`` ascending flat indices (may be empty)."""
+    ``np.add.reduce`` takes it (``surface._water_mean``); ``solid`` ascending flat indices (may be empty).  When
+    bodies cover every vertex there is no water to measure: the mean of all the vertices (0/0 before, which
+    made the whole pool NaN for good)."""
     flat = field.ravel()
     total = 0.0 + pairwise_sum(flat, 0, flat.size)
-    if len(solid) == 0:
+    if len(solid) == 0 or len(solid) >= flat.size:
         return total / flat.size
     held = np.empty(len(solid))
     for i in range(len(solid)):

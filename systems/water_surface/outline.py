@@ -394,7 +394,9 @@ def outline_impulse(points: AddedPoints, sections: Sections, previous: Sections,
     and sinks by α·d(t) when N_c(t) lay inside D'(t − 1) (the body left that space). The outline itself counts as
     inside (a corner gliding along a side was on D'(t) at t − 1). The rises and falls of one body balance: the
     outline's points are not evenly spaced, so the raw ±α·d(t) would create or remove water; the body's mean
-    change is taken off all of its points. Bodies without a cross-section at t − 1 make no wave this step.
+    change is taken off all of its points (so a body whose section only grows or shrinks, sinking or rising,
+    makes almost no wave: eq. 2.6 as printed made a floating sphere pump its own bobbing; see the effect's docs,
+    "Deviations"). Bodies without a cross-section at t − 1 make no wave this step.
     Returns (change of height, d(t) in metres, raised, lowered).
     """
     if len(points) == 0:

@@ -93,8 +93,9 @@ def _slots(state: WaterState) -> I64:
 
 
 def _water_mean(field: F64, solid: I64 | None) -> float:
-    """Mean height of the vertices that are water (all but the flat indices ``solid``)."""
-    if solid is None:
+    """Mean height of the vertices that are water (all but the flat indices ``solid``); of all the vertices when
+    bodies cover every one (no water to measure)."""
+    if solid is None or len(solid) >= field.size:
         return float(field.mean())
     return float((sum_of(field, axis=None) - sum_of(field.ravel()[solid])) / (field.size - len(solid)))
 

@@ -168,3 +168,26 @@ def test_dents_are_clipped_to_the_grid_before_they_are_listed():
     touched, change = dents(grid, centres[:2], heights[:2], 5000.0)  # 20,000 cells of reach: 1.6e9 listed before
     np.testing.assert_array_equal(touched, np.arange(144))
     np.testing.assert_allclose(change, -heights[:2].sum(), rtol=1e-5)  # exp(−r²/R²) ≈ 1 over the grid
+
+
+def test_a_body_covering_every_vertex_leaves_the_water_finite():
+    """A 4 × 4 m box over a 2.8 × 2.8 m pool: no vertex is water, so the mean level to keep was 0/0 and the whole
+    pool turned NaN for good; it stays finite, also after the body is gone."""
+    import warnings
+
+    from systems.water_surface.geometry import empty_bodies
+    from systems.water_surface.surface import step_water
+    from tests.systems.water_surface.helpers import box, make_grid, make_state, water_config
+
+    grid = make_grid(8, 0.4)
+    cfg = water_config(resolution=[8, 8], spacing=0.4)
+    state = make_state(grid)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for t in range(3):
+            step_water(state, cfg, grid, box(0.01 * t, 0.0, half=(2.0, 0.5, 2.0)), 1 / 60)
+            assert state.solid.all()
+            assert np.isfinite(state.heights).all()
+        for _ in range(3):
+            step_water(state, cfg, grid, empty_bodies(), 1 / 60)
+            assert np.isfinite(state.heights).all()
