@@ -28,7 +28,7 @@ from engine.spatial import Transform
 
 SHADERS = Path(__file__).parent / "shaders"
 RAMP_TEXELS = 256
-MAX_VOLUMES = 16
+OUTLINE_BATCH = 64  # volumes per outline pass (the shader's uniform arrays); any number are drawn
 
 
 def _outline_reach(data: list[VolumeDraw]) -> int:
@@ -138,7 +138,7 @@ class ToonSmokeFeature(RenderFeature):
         alive = {entity for entity, _ in query}
         for entity in [e for e in self._meshes if e not in alive]:  # despawned volumes
             self._meshes.pop(entity).release()
-        for index, (entity, (t, cfg, state)) in enumerate(query[:MAX_VOLUMES]):
+        for index, (entity, (t, cfg, state)) in enumerate(query):
             gpu = self._meshes.get(entity)
             mesh = None
             if (gpu is None or gpu.version != state.mesh_version) and state.mesh_vertices is not None:
@@ -271,17 +271,24 @@ class ToonSmokeFeature(RenderFeature):
             prog = self.renderer.load_program(SHADERS, "outline")
             self._outline_vao = self.ctx.vertex_array(prog, [])
         prog = self._outline_vao.program
-        widths, thresholds, colors = [0.0] * MAX_VOLUMES, [0.0] * MAX_VOLUMES, [(0.0, 0.0, 0.0)] * MAX_VOLUMES
-        for draw in data:
-            widths[draw.index] = draw.outline_width
-            thresholds[draw.index] = draw.outline_threshold
-            colors[draw.index] = draw.outline_color
         pc.get(edges_handle).use(0)
         prog["edges"].value = 0
-        prog["widths"].value = widths
-        prog["thresholds"].value = thresholds
-        prog["colors"].value = [tuple(map(float, c)) for c in display_to_hdr(colors, self.renderer.settings.exposure)]
-        self._outline_vao.render(moderngl.TRIANGLES, vertices=3)
+        batches = sorted({draw.index // OUTLINE_BATCH for draw in data})
+        for batch in batches:  # one pass per 64 volumes (one in practice)
+            first = batch * OUTLINE_BATCH
+            widths, thresholds = [0.0] * OUTLINE_BATCH, [0.0] * OUTLINE_BATCH
+            colors = [(0.0, 0.0, 0.0)] * OUTLINE_BATCH
+            for draw in data:
+                if first <= draw.index < first + OUTLINE_BATCH:
+                    widths[draw.index - first] = draw.outline_width
+                    thresholds[draw.index - first] = draw.outline_threshold
+                    colors[draw.index - first] = draw.outline_color
+            prog["first"].value = first
+            prog["widths"].value = widths
+            prog["thresholds"].value = thresholds
+            prog["colors"].value = [tuple(map(float, c))
+                                    for c in display_to_hdr(colors, self.renderer.settings.exposure)]
+            self._outline_vao.render(moderngl.TRIANGLES, vertices=3)
         fbo.viewport = (0, 0, view.width, view.height)
 
     def release(self) -> None:

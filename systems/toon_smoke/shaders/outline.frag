@@ -4,9 +4,11 @@
 // of its depth (inner contour lines where one lump of smoke overlaps another).  Outlines lie inside the
 // silhouette, so whatever hides the smoke hides its outline too.
 uniform sampler2D edges;
-uniform float widths[16];
-uniform float thresholds[16];
-uniform vec3 colors[16];  // HDR: the tone map turns them into the configured outline colours
+// The outline parameters of volumes first .. first + 63 (the pass runs once per 64 volumes drawn).
+uniform int first;
+uniform float widths[64];
+uniform float thresholds[64];
+uniform vec3 colors[64];  // HDR: the tone map turns them into the configured outline colours
 out vec4 frag;
 void main() {
     ivec2 size = textureSize(edges, 0);
@@ -14,7 +16,8 @@ void main() {
     vec2 e = texelFetch(edges, p, 0).rg;
     int id = int(e.r + 0.5);
     if (id == 0) discard;
-    int volume = (id - 1) / 2;
+    int volume = (id - 1) / 2 - first;
+    if (volume < 0 || volume >= 64) discard;
     float w = widths[volume];
     if (w <= 0.0) discard;
     int reach = int(ceil(w));

@@ -125,3 +125,42 @@ def test_cel_colours_reach_the_screen_unchanged_at_any_exposure(tmp_path):
     cfg = preset("paper")
     assert sum(_close(pixels, c).sum() for c in cfg.ramp_colors) > 300
     assert _close(pixels, cfg.outline_color).sum() > 50
+
+
+def test_every_volume_is_drawn_with_its_outline_past_the_outline_batch(tmp_path):
+    """Volumes beyond the 16th were simulated but never drawn. The volume the camera sees is made the 71st (70
+    empty volumes before it, past the outline pass's batch of 64): the picture is the one it gives as the only
+    volume, outline included."""
+    from components.toon_smoke import ToonSmokeState, ToonSmokeVolumeConfig
+    from engine.spatial import Transform
+    from systems.toon_smoke import simulate
+    from tests.systems.toon_smoke.helpers import small
+
+    app = preset_app(tmp_path, "paper")
+    app.step(STEPS["paper"])
+    renderer = make_renderer(app, 160, 120)
+    try:
+        app.render_frame()
+        alone = np.asarray(renderer.read_image()).astype(int)
+    finally:
+        renderer.release()
+        app.renderer = None
+    world = app.world
+    (entity, (transform, cfg, state)), = world.query(Transform, ToonSmokeVolumeConfig, ToonSmokeState)
+    empty = small(obstacle_radius=0.0)
+    for i in range(70):  # no mesh yet: they take an index each and draw nothing
+        world.spawn(Transform(position=np.array([500.0 + i, 0.0, 0.0])), empty,
+                    simulate.new_state(empty, np.random.default_rng(i)))
+    world.despawn(entity)
+    world.commands.apply()
+    world.spawn(transform, cfg, state)
+    world.commands.apply()
+    renderer = make_renderer(app, 160, 120)
+    try:
+        app.render_frame()
+        last = np.asarray(renderer.read_image()).astype(int)
+    finally:
+        renderer.release()
+        app.renderer = None
+    assert (np.abs(alone - np.asarray(alone[0, 0])).max(axis=-1) > 40).sum() > 500  # the smoke is on screen
+    assert np.abs(last - alone).max() <= 2
