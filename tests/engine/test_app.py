@@ -11,7 +11,7 @@ def spinner_rotation(app):
             return t.rotation.copy()
 
 
-def test_pause_skips_simulation_but_not_scripts():
+def test_pause_skips_simulation_and_the_stock_scripts_wait():
     calls = []
     app = App(SCENE)
     app.registry.schedule  # the sandbox has no simulation system of its own: add one
@@ -22,7 +22,13 @@ def test_pause_skips_simulation_but_not_scripts():
         before = spinner_rotation(app)
         app.step(3)
         assert calls == [0, 1]  # simulation stage skipped while paused
-        assert (spinner_rotation(app) != before).any()  # scripts (game logic, menus) still run
+        # scripts still run (menus, the pause key: the demo's Esc unpauses), but the stock spin script advances
+        # game time, so it waits while ScriptContext.paused is set
+        assert (spinner_rotation(app) == before).all()
+        app.world.resource(TimeControl).paused = False
+        app.step(1)
+        assert calls == [0, 1, 5]
+        assert (spinner_rotation(app) != before).any()
     finally:
         app.schedule.systems[:] = [s for s in app.schedule.systems if s.name != "test.counter"]
         app.schedule._sorted = None
