@@ -127,6 +127,17 @@ def test_cel_colours_reach_the_screen_unchanged_at_any_exposure(tmp_path):
     assert _close(pixels, cfg.outline_color).sum() > 50
 
 
+def _frame(app) -> np.ndarray:
+    """One 160 × 120 frame of ``app``, read back (the renderer released after)."""
+    renderer = make_renderer(app, 160, 120)
+    try:
+        app.render_frame()
+        return np.asarray(renderer.read_image()).astype(int)
+    finally:
+        renderer.release()
+        app.renderer = None
+
+
 def test_every_volume_is_drawn_with_its_outline_past_the_outline_batch(tmp_path):
     """Volumes beyond the 16th were simulated but never drawn. The volume the camera sees is made the 71st (70
     empty volumes before it, past the outline pass's batch of 64): the picture is the one it gives as the only
@@ -138,13 +149,7 @@ def test_every_volume_is_drawn_with_its_outline_past_the_outline_batch(tmp_path)
 
     app = preset_app(tmp_path, "paper")
     app.step(STEPS["paper"])
-    renderer = make_renderer(app, 160, 120)
-    try:
-        app.render_frame()
-        alone = np.asarray(renderer.read_image()).astype(int)
-    finally:
-        renderer.release()
-        app.renderer = None
+    alone = _frame(app)
     world = app.world
     (entity, (transform, cfg, state)), = world.query(Transform, ToonSmokeVolumeConfig, ToonSmokeState)
     empty = small(obstacle_radius=0.0)
@@ -155,12 +160,6 @@ def test_every_volume_is_drawn_with_its_outline_past_the_outline_batch(tmp_path)
     world.commands.apply()
     world.spawn(transform, cfg, state)
     world.commands.apply()
-    renderer = make_renderer(app, 160, 120)
-    try:
-        app.render_frame()
-        last = np.asarray(renderer.read_image()).astype(int)
-    finally:
-        renderer.release()
-        app.renderer = None
+    last = _frame(app)
     assert (np.abs(alone - np.asarray(alone[0, 0])).max(axis=-1) > 40).sum() > 500  # the smoke is on screen
     assert np.abs(last - alone).max() <= 2
