@@ -42,6 +42,13 @@ class TimeControl:
     restart_requested: bool = False
 
 
+def is_paused(world: World) -> bool:
+    """Whether ``world``'s game is paused (``engine.pause``): its simulation stages are skipped; input and scripts
+    still run, and what advances game time there (a drag, a countdown, an animation) should wait too."""
+    control = world.try_resource(TimeControl)
+    return bool(control is not None and control.paused)
+
+
 class App:
     """One running game: world + schedule + clock (+ an optional renderer)."""
 

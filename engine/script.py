@@ -107,10 +107,9 @@ class ScriptContext:
         """True while the game is paused (``engine.pause``): the simulation stages are skipped, scripts still run
         (menus, the pause key). A script that advances game time (a countdown, an animation, a spawner) should
         wait while this is set, as the simulation does."""
-        from engine.app import TimeControl
+        from engine.app import is_paused
 
-        control = self.world.try_resource(TimeControl)
-        return bool(control is not None and control.paused)
+        return is_paused(self.world)
 
     @property
     def window_size(self) -> tuple[int, int]:

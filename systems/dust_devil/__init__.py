@@ -148,12 +148,11 @@ def mouse_drag_system(world, dt: float) -> None:
     ground distance (horizontal), release ends the drag (section 4).  A paused game (``engine.pause``) freezes
     the dust devil with the rest of the simulation: no drag starts or goes on while it is paused (a drag in
     progress ends; the button must be pressed again after the pause)."""
-    from engine.app import TimeControl
+    from engine.app import is_paused
     from engine.input import InputState
 
     inp = world.resource(InputState)
-    control = world.try_resource(TimeControl)
-    paused = control is not None and control.paused
+    paused = is_paused(world)
     for _, (transform, cfg, state) in world.query(Transform, DustDevilConfig, DustDevilState):
         button = f"mouse_{cfg.drag_button}"
         if paused or not cfg.drag_camera or not inp.is_down(button):

@@ -273,21 +273,21 @@ class ToonSmokeFeature(RenderFeature):
         prog = self._outline_vao.program
         pc.get(edges_handle).use(0)
         prog["edges"].value = 0
-        batches = sorted({draw.index // OUTLINE_BATCH for draw in data})
-        for batch in batches:  # one pass per 64 volumes (one in practice)
-            first = batch * OUTLINE_BATCH
-            widths, thresholds = [0.0] * OUTLINE_BATCH, [0.0] * OUTLINE_BATCH
-            colors = [(0.0, 0.0, 0.0)] * OUTLINE_BATCH
-            for draw in data:
-                if first <= draw.index < first + OUTLINE_BATCH:
-                    widths[draw.index - first] = draw.outline_width
-                    thresholds[draw.index - first] = draw.outline_threshold
-                    colors[draw.index - first] = draw.outline_color
+        size = -(-(max(draw.index for draw in data) + 1) // OUTLINE_BATCH) * OUTLINE_BATCH
+        widths, thresholds, colors = np.zeros(size), np.zeros(size), np.zeros((size, 3))
+        for draw in data:
+            widths[draw.index] = draw.outline_width
+            thresholds[draw.index] = draw.outline_threshold
+            colors[draw.index] = draw.outline_color
+        colors = display_to_hdr(colors, self.renderer.settings.exposure)
+        for first in range(0, size, OUTLINE_BATCH):  # one pass per 64 volumes (one in practice)
+            batch = slice(first, first + OUTLINE_BATCH)
+            if not widths[batch].any():
+                continue
             prog["first"].value = first
-            prog["widths"].value = widths
-            prog["thresholds"].value = thresholds
-            prog["colors"].value = [tuple(map(float, c))
-                                    for c in display_to_hdr(colors, self.renderer.settings.exposure)]
+            prog["widths"].value = widths[batch].tolist()
+            prog["thresholds"].value = thresholds[batch].tolist()
+            prog["colors"].value = [tuple(map(float, c)) for c in colors[batch]]
             self._outline_vao.render(moderngl.TRIANGLES, vertices=3)
         fbo.viewport = (0, 0, view.width, view.height)
 

@@ -78,24 +78,7 @@ def test_dragging_the_dust_devil_with_injected_mouse_events_moves_it():
     app = App(SCENE)
     app.step(1)
     world = app.world
-    devil = find_named_world(world, "dust_devil")
-    start = world.get(devil, Transform).position.copy()
-    pilot = AutoPilot(window=(app.config.render.width, app.config.render.height))
-    top = find_named_world(world, "top_camera")
-    p0 = pilot._to_pixels(world, top, start)
-    goal = start + np.array([-12.0, 0.0, 8.0])
-    p1 = pilot._to_pixels(world, top, goal)
-    queue = world.resource(InputQueue)
-    queue.push(InputEvent("mouse_move", x=p0[0], y=p0[1]))
-    queue.push(InputEvent("button_down", "left", x=p0[0], y=p0[1]))
-    app.step(1)
-    for i in range(1, 5):
-        x, y = p0[0] + (p1[0] - p0[0]) * i / 4, p0[1] + (p1[1] - p0[1]) * i / 4
-        queue.push(InputEvent("mouse_move", x=x, y=y, dx=(p1[0] - p0[0]) / 4, dy=(p1[1] - p0[1]) / 4))
-        app.step(1)
-    queue.push(InputEvent("button_up", "left", x=p1[0], y=p1[1]))
-    app.step(1)
-    moved = world.get(devil, Transform).position - start
+    moved = _drag_devil(app, (-12.0, 8.0))
     chase = 3.0 * 6 * app.dt  # the chaser script's own drift over these ticks, at most
     assert np.hypot(moved[0] + 12.0, moved[2] - 8.0) < 0.5 + chase
     assert world.resource(GameState).phase == "playing"
