@@ -42,6 +42,11 @@ class Commands:
     def __len__(self) -> int:
         return len(self._queue)
 
+    def pending(self) -> tuple[list[tuple[Entity, tuple]], set[Entity]]:
+        """What the queue will do when applied: the spawns ``(entity, components)`` and the despawned ids."""
+        spawns = [(entity, payload) for op, entity, payload in self._queue if op == "spawn"]
+        return spawns, {entity for op, entity, _ in self._queue if op == "despawn"}
+
     def apply(self) -> int:
         """Apply queued commands in order; returns how many ran.
 

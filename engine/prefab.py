@@ -90,6 +90,9 @@ class PrefabLibrary:
                 problems.append(build_problem(file, f"components.{cname}", exc))
         if problems:
             raise ConfigError(problems)
+        problems = budget_problems(world, plan, file)
+        if problems:
+            raise ConfigError(problems)
         if position is not None:
             transform = next((c for c in built if isinstance(c, Transform)), None)
             if transform is None:
@@ -106,3 +109,31 @@ class PrefabLibrary:
         built.extend(extra)
         world.commands.spawn_reserved(entity, built)
         return entity
+
+
+def budget_problems(world: World, plan: EntityPlan, file: str) -> list[Problem]:
+    """The scene-wide budgets (``engine.scene.scene_budget_problems``) at run time: the prefab's cost of each
+    (``scene_budgets(fixed_dt)``) plus that of every entity of the same component alive or queued to spawn
+    (minus those queued to despawn) must stay within the limit one entity may have.  A spawner script that
+    runs long cannot grow the scene past what loading it would have refused."""
+    from engine.app import App
+
+    found: list[Problem] = []
+    fixed_dt = world.resource(App).config.scene.fixed_dt
+    spawns, despawns = world.commands.pending()
+    for cname, cfg in plan.components:
+        budgets = getattr(cfg, "scene_budgets", None)
+        if not callable(budgets):
+            continue
+        others = [c for entity, (c,) in world.query(type(cfg)) if entity not in despawns]
+        others += [c for entity, comps in spawns if entity not in despawns for c in comps if type(c) is type(cfg)]
+        for what, cost, limit in budgets(fixed_dt):
+            if not cost:
+                continue
+            used = sum(c2 for c in others for w2, c2, _ in c.scene_budgets(fixed_dt) if w2 == what)
+            if used + cost > limit:
+                found.append(Problem(file, f"components.{cname}",
+                                     f"not spawned: with the {len(others)} {cname} entities alive or queued the "
+                                     f"scene would need {used + cost:,.0f} {what}, more than the {limit:,.0f} "
+                                     f"one entity may have; despawn some first or make the prefab smaller"))
+    return found

@@ -52,3 +52,46 @@ def test_the_budget_is_reported_with_the_scenes_other_problems(tmp_path):
         plan_scene(_scene(tmp_path, [GRASS.format(n=60), GRASS.format(n=60), "[entities.components.Camera]\nfov = 1.0\n"]),
                    default_registry())
     assert {p.key for p in err.value.problems} == {"entities", "entities[2].components.Camera.fov"}
+
+
+def _app_with_prefab(tmp_path: Path, scene_tables: list[str]):
+    from engine.app import App
+
+    scene = _scene(tmp_path, scene_tables)
+    prefabs = scene.parent.parent / "prefabs"
+    prefabs.mkdir()
+    (prefabs / "devil.toml").write_text('name = "devil"\n' + DEVIL.replace("entities.components", "components"))
+    return App(scene, strict=True)
+
+
+def test_a_prefab_spawned_at_run_time_cannot_pass_the_scene_budget(tmp_path):
+    """The scene loads with one dust devil of 5 M PBVR points; a script spawning a second one (10 M together, the
+    limit is 8 M) is refused naming the prefab's file and component, and nothing is queued."""
+    from engine.script import ScriptContext
+
+    app = _app_with_prefab(tmp_path, [DEVIL])
+    ctx = ScriptContext(app.world, 1, "test")
+    queued = len(app.world.commands)
+    with pytest.raises(ConfigError) as err:
+        ctx.spawn_prefab("devil")
+    problems = err.value.problems
+    assert all(p.file.endswith("devil.toml") and p.key == "components.DustDevil" for p in problems)
+    assert any("10,000,000 PBVR points" in p.message and "8,000,000" in p.message for p in problems)
+    assert len(app.world.commands) == queued
+
+
+def test_run_time_budget_counts_queued_spawns_and_despawns(tmp_path):
+    from engine.builtin import Name
+    from engine.script import ScriptContext
+
+    app = _app_with_prefab(tmp_path, ["[entities.components.Transform]\n"])
+    ctx = ScriptContext(app.world, 1, "test")
+    ctx.spawn_prefab("devil")  # alone: within the limit
+    with pytest.raises(ConfigError, match="10,000,000 PBVR points"):
+        ctx.spawn_prefab("devil")  # the first is only queued, and still counts
+    app.world.commands.apply()
+    [devil] = [e for e, (n,) in app.world.query(Name) if n.value == "devil"]
+    ctx.despawn(devil)
+    ctx.spawn_prefab("devil")  # replaces the one queued to despawn
+    app.world.commands.apply()
+    assert [n.value for _, (n,) in app.world.query(Name)].count("devil") == 1
