@@ -56,15 +56,33 @@ class ScriptContext:
         self.entity = entity
         self.script_name = script_name
 
-    # components of this entity
-    def get(self, ctype: type[T]) -> T:
-        return self.world.get(self.entity, ctype)
+    # components: this entity's, or another's (``entity``: an id from find, query or spawn)
+    def get(self, ctype: type[T], entity: Entity | None = None) -> T:
+        return self.world.get(self.entity if entity is None else entity, ctype)
 
-    def try_get(self, ctype: type[T]) -> T | None:
-        return self.world.try_get(self.entity, ctype)
+    def try_get(self, ctype: type[T], entity: Entity | None = None) -> T | None:
+        return self.world.try_get(self.entity if entity is None else entity, ctype)
+
+    def alive(self, entity: Entity) -> bool:
+        return self.world.alive(entity)
 
     def query(self, *ctypes: type, exclude: tuple[type, ...] = ()):
         return self.world.query(*ctypes, exclude=exclude)
+
+    def find(self, name: str) -> Entity | None:
+        """The lowest-id live entity the scene (or a prefab) named ``name``; None when there is none."""
+        from engine.builtin import Name
+
+        for entity, (n,) in self.world.query(Name):
+            if n.value == name:
+                return entity
+        return None
+
+    def ground_height(self, x: float, z: float) -> float | None:
+        """World height of the scene's terrain under world (x, z); None without a terrain."""
+        from engine.builtin import ground_height
+
+        return ground_height(self.world, x, z)
 
     @property
     def commands(self):
@@ -92,6 +110,14 @@ class ScriptContext:
 
     def resource(self, rtype: type[T]) -> T:
         return self.world.resource(rtype)
+
+    def try_resource(self, rtype: type[T]) -> T | None:
+        return self.world.try_resource(rtype)
+
+    def insert_resource(self, resource: Any, *, state: bool = True) -> None:
+        """Share ``resource`` (one per type) with every script; as game state (``state=True``, the default) it is
+        part of state hashes and snapshots, so a restart, a replay or a determinism test sees it."""
+        self.world.insert_resource(resource, state=state)
 
     @property
     def rng(self):

@@ -141,10 +141,8 @@ class SnapToGround(Script):
         offset: float = Field(0.0, ge=-1000.0, le=1000.0, description="Metres above the ground.")
 
     def on_start(self) -> None:
-        from engine.builtin import ground_height
-
         t = self.ctx.get(Transform)
-        ground = ground_height(self.ctx.world, float(t.position[0]), float(t.position[2]))
+        ground = self.ctx.ground_height(float(t.position[0]), float(t.position[2]))
         if ground is not None:
             t.position[1] = ground + self.params.offset
 

@@ -25,7 +25,7 @@ class DustDevilChaser(Script):
         if player is None:
             return
         here = self.ctx.get(Transform).position
-        there = self.ctx.world.get(player, Transform).position
+        there = self.ctx.get(Transform, player).position
         d = np.array([there[0] - here[0], 0.0, there[2] - here[2]])
         dist = float(np.linalg.norm(d))
         if dist > 1e-6:

@@ -5,7 +5,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from engine.builtin import Name, Terrain
-from engine.builtin import ground_height as engine_ground_height
 
 PATTERNS = "ABCDEFGH"
 
@@ -40,20 +39,20 @@ class TargetDestroyed:
 
 
 def game_state(ctx) -> GameState:
-    state = ctx.world.try_resource(GameState)
+    state = ctx.try_resource(GameState)
     if state is None:
         state = GameState()
-        ctx.world.insert_resource(state, state=True)
+        ctx.insert_resource(state)
     return state
 
 
 def find_named(ctx, name: str) -> int | None:
-    return find_named_world(ctx.world, name)
+    return ctx.find(name)
 
 
 def ground_height(ctx, x: float, z: float) -> float:
     """Terrain height under (x, z) in world space (0 without terrain)."""
-    height = engine_ground_height(ctx.world, x, z)
+    height = ctx.ground_height(x, z)
     return 0.0 if height is None else height
 
 

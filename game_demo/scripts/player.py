@@ -120,7 +120,7 @@ class Player(Script):
         if cam is None:
             return
         t = self.ctx.get(Transform)
-        ct = self.ctx.world.get(cam, Transform)
+        ct = self.ctx.get(Transform, cam)
         look = quat_from_euler(self.yaw, self.pitch - math.radians(self.params.camera_look_down), 0.0)
         back = quat_rotate(look, np.array([0.0, 0.0, 1.0]))
         ct.position = t.position + back * self.params.camera_distance + np.array([0.0, self.params.camera_height, 0.0])

@@ -65,8 +65,8 @@ class GameRules(Script):
         devil = find_named(self.ctx, self.params.dust_devil)
         if player is None or devil is None:
             return float("inf")
-        a = self.ctx.world.get(player, Transform).position
-        b = self.ctx.world.get(devil, Transform).position
+        a = self.ctx.get(Transform, player).position
+        b = self.ctx.get(Transform, devil).position
         return float(np.hypot(a[0] - b[0], a[2] - b[2]))
 
     def _hud(self, state) -> None:

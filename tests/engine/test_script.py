@@ -181,3 +181,42 @@ def test_a_script_error_names_the_scene_file_and_key(tmp_path, caplog):
     with pytest.raises(ScriptError, match=r"entities\[1\]\.scripts\[0\]: script 'raises' on entity 2 \('b'\) "
                                           r"raised in on_update: boom"):
         strict.step(1)
+
+
+def test_context_reaches_other_entities_resources_and_the_ground(tmp_path):
+    """The scripting API a game needs for other entities (find by name, their components), shared state (a
+    resource that is part of the state hash) and the terrain's height, without reaching into ctx.world."""
+    import numpy as np
+
+    from engine.builtin import Terrain
+    from engine.script import ScriptContext
+    from engine.spatial import Transform
+
+    scene = tmp_path / "s.toml"
+    scene.write_text("[[entities]]\nname = 'me'\n[entities.components.Transform]\n"
+                     "[[entities]]\nname = 'ground'\n[entities.components.Transform]\nposition = [0.0, 2.0, 0.0]\n"
+                     "[entities.components.Terrain]\nsize_exponent = 3\n"
+                     "[[entities]]\nname = 'crate'\n[entities.components.Transform]\nposition = [1.0, 5.0, 2.0]\n")
+    app = App(scene, strict=True)
+    me = 1
+    ctx = ScriptContext(app.world, me, "test")
+    crate = ctx.find("crate")
+    assert crate is not None and crate != me and ctx.find("nobody") is None
+    assert np.array_equal(ctx.get(Transform, crate).position, [1.0, 5.0, 2.0])
+    assert ctx.try_get(Terrain, crate) is None and ctx.try_get(Terrain, ctx.find("ground")) is not None
+    assert ctx.get(Transform) is app.world.get(me, Transform)
+    expected = app.world.get(ctx.find("ground"), Terrain).field.height_at(np.array([3.0]), np.array([-1.0]))[0] + 2.0
+    assert ctx.ground_height(3.0, -1.0) == pytest.approx(expected)
+
+    @dataclass
+    class Score:
+        points: int = 0
+
+    before = app.state_hash()
+    assert ctx.try_resource(Score) is None
+    ctx.insert_resource(Score(7))
+    assert ctx.resource(Score).points == 7
+    assert app.state_hash() != before  # shared script state is game state by default
+    ctx.despawn(crate)
+    app.world.commands.apply()
+    assert not ctx.alive(crate) and ctx.find("crate") is None
