@@ -108,12 +108,18 @@ def gallery_command(args: argparse.Namespace) -> int:
                 target = out / preset.parent.name / f"{preset.stem}.png"
                 renderer.save_screenshot(target)
                 renderer.release()
-                entries.append((rel, target, preset_title(preset)))
                 print(f"rendered {rel} -> {target}")
             except (ConfigError, UnicodeDecodeError) as exc:
-                failures.append(f"{rel}: {exc}")
+                failures.append((rel, f"{rel}: {exc}"))
+    # The index lists every preset with a picture (rendered now or by an earlier run), so a run with --only
+    # updates its pictures without dropping the others from the page; a preset that failed now is left out.
+    failed = {rel for rel, _ in failures}
+    for preset, _ in _selected_presets(configs, registry, None):
+        rel, target = f"{preset.parent.name}/{preset.stem}", out / preset.parent.name / f"{preset.stem}.png"
+        if rel not in failed and target.is_file():
+            entries.append((rel, target, preset_title(preset)))
     _write_index(out, entries)
-    for failure in failures:
+    for _, failure in failures:
         print(failure)
     return 1 if failures else 0
 

@@ -25,9 +25,13 @@ def test_gallery_command_renders_a_preset(tmp_path):
     import sys
 
     out = tmp_path / "gallery"
+    (out / "dust_devil").mkdir(parents=True)
+    (out / "dust_devil" / "paper.png").write_bytes(b"rendered by an earlier run")
     res = subprocess.run([sys.executable, "-m", "engine", "gallery", "--out", str(out), "--only",
                           "toon_smoke/explosion", "--size", "96", "64"], capture_output=True, text=True, cwd=ROOT)
     assert res.returncode == 0, res.stderr[-2000:]
     assert (out / "toon_smoke" / "explosion.png").exists()
     index = (tmp_path / "gallery.md").read_text()
     assert "toon_smoke/explosion" in index and "explosion.png" in index
+    # --only re-renders one preset; the page keeps the presets an earlier run drew (and lists no missing picture)
+    assert "dust_devil/paper.png" in index and "small_whirl" not in index

@@ -20,7 +20,7 @@ def registry():
 
 
 def test_the_three_presets_exist():
-    assert {p.stem for p in PRESETS} >= {"paper", "small_whirl", "large_storm"}
+    assert {p.stem for p in PRESETS} >= {"paper", "small_whirl", "large_storm", "tall_column"}
 
 
 @pytest.mark.parametrize("path", PRESETS, ids=lambda p: p.stem)

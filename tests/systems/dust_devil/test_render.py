@@ -131,7 +131,7 @@ def test_repeats_drop_while_dragging_and_real_particles_hidden(tmp_path, gl_ctx)
     assert any(".points." in n for n in names) and not any("pbvr" in n for n in names)
 
 
-@pytest.mark.parametrize("preset", ["paper", "small_whirl", "large_storm"])
+@pytest.mark.parametrize("preset", ["paper", "small_whirl", "large_storm", "tall_column"])
 def test_preset_renders(tmp_path, gl_ctx, preset):
     """Each preset draws visible dust: the image differs from the same scene without the dust devil's dust."""
     import tomllib
