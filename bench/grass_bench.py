@@ -183,12 +183,12 @@ def selection_time(bench: Bench, grid: int = 40) -> tuple[float, float, float]:
     centres = data.placed.cell_centre
     compiled, reference, plans = [], [], []
     orientation = ImpostorOrientation(data.cell_count)
-    contents: dict[int, np.ndarray] = {}  # the renderer caches each viewer cell's band content (FieldGpu.band_content)
+    contents: dict[tuple, np.ndarray] = {}  # the renderer caches each viewer cell's band content (FieldGpu.band_content)
 
-    def band_content(cell: int) -> np.ndarray:
-        if cell not in contents:
-            contents[cell] = band_sector_content(data, cell, cfg.merge_distance)
-        return contents[cell]
+    def band_content(cell: int, apothem: float) -> np.ndarray:
+        if (cell, apothem) not in contents:
+            contents[(cell, apothem)] = band_sector_content(data, cell, apothem)
+        return contents[(cell, apothem)]
 
     for _ in range(5):
         for eye, yaw in walkthrough():

@@ -17,7 +17,7 @@ from systems.grass_field.lod import (_BAND_NORMALS, N_BAND_SIDES, CameraInput, I
                                      visible_band_sides, wrap_angle)
 from systems.grass_field.simulate import FieldData
 
-__all__ = ["FramePlan", "plan_frame", "cell_levels", "band_sector_content"]
+__all__ = ["FramePlan", "plan_frame", "cell_levels", "band_sector_content", "band_apothem"]
 
 NEAR_SORTED_LEVELS = 3
 
@@ -38,6 +38,7 @@ class FramePlan:
     band_sides: np.ndarray = field(default_factory=lambda: np.zeros(N_BAND_SIDES, dtype=bool))
     primitives: dict[int, int] = field(default_factory=dict)  # per level, real primitives
     plant_list: np.ndarray | None = None  # int32: ``plants`` one after the other (what the renderer uploads)
+    band_apothem: float = 0.0  # the band's distance from the viewer's cell in this view (band_apothem)
 
     @property
     def total_primitives(self) -> int:
@@ -46,6 +47,22 @@ class FramePlan:
     def level_counts(self) -> np.ndarray:
         """Cells per level: index 0 = culled, 1..6 = levels 0..5."""
         return np.bincount(self.levels + 1, minlength=7)
+
+
+def band_apothem(cfg: GrassFieldConfig, data: FieldData, camera: CameraInput) -> float:
+    """The band's apothem in this view.  Level 5 replaces only cells that eq. 1 already puts at level 4 (section
+    6: the merged images stand beyond the 3→4 distance), and that distance, D₃₄ = W·L / (2·tan θ·P₃₄), grows with
+    the view's width W.  The band lies at ``merge_distance`` unless D₃₄ plus the band's slack (the eye anywhere in
+    the viewer's cell and a cell's eq.-1 point anywhere in its cell: two cell radii) reaches past it; then it
+    lies there, rounded up to whole cells so that resizing a window re-bakes the band only when it moves a cell.
+    Without this, a wide window put cells that eq. 1 wants as geometry into the band's blurry images."""
+    if camera.ortho_pixels_per_unit is not None:
+        return float(cfg.merge_distance)
+    d34 = camera.width * cfg.length_of_interest / (2.0 * camera.tan_half_fov * min(cfg.level_thresholds))
+    need = d34 + 2.0 * float(data.cell_radius)
+    if need <= cfg.merge_distance:
+        return float(cfg.merge_distance)
+    return float(np.ceil(need / cfg.cell_size) * cfg.cell_size)
 
 
 def band_sector_content(data: FieldData, centre_cell: int, apothem: float) -> np.ndarray:
@@ -108,11 +125,12 @@ def plan_frame(cfg: GrassFieldConfig, data: FieldData, camera: CameraInput, orie
     fwd = camera.forward[[0, 2]]
     if compiled and camera.ortho_pixels_per_unit is None and fwd @ fwd >= 1e-12:
         return _plan_compiled(cfg, data, camera, orientation, max_level, band_content, viewer)
+    apothem = band_apothem(cfg, data, camera)
     keep = cull_cells(placed.cell_centre, camera, cell_radius=data.cell_radius,
                       near_distance=cfg.near_cull_cells * cfg.cell_size, viewer_cell=viewer) & ~data.bare
     levels = select_levels(data.lod_points, camera, length=cfg.length_of_interest,
                            thresholds=cfg.level_thresholds, max_level=max_level,
-                           merge_distance=cfg.merge_distance, viewer_cell_centre=placed.cell_centre[viewer],
+                           merge_distance=apothem, viewer_cell_centre=placed.cell_centre[viewer],
                            keep=keep)
     cells = _near_first(levels, placed.cell_centre, camera.position)
     plants = _plants_to_draw(data, cells, camera)
@@ -139,25 +157,26 @@ def plan_frame(cfg: GrassFieldConfig, data: FieldData, camera: CameraInput, orie
         blend = np.zeros(len(impostors))
     prims[4] = 2 * len(impostors)
 
-    band_cell, sides = _band(cfg, data, camera, levels, max_level, band_content, viewer)
+    band_cell, sides = _band(data, camera, levels, max_level, band_content, viewer, apothem)
     prims[5] = 2 * int(sides.sum())
     return FramePlan(levels, cells, plants, impostors, orientation.face[impostors].copy(), views.astype(np.int64),
-                     blend, viewer, band_cell, sides, prims)
+                     blend, viewer, band_cell, sides, prims, band_apothem=apothem)
 
 
-def _band(cfg: GrassFieldConfig, data: FieldData, camera: CameraInput, levels: np.ndarray, max_level: int,
-          band_content, viewer: int) -> tuple[int | None, np.ndarray]:
-    """The cell whose band is shown (None: no band) and its sides to draw (visible, with far cells behind)."""
+def _band(data: FieldData, camera: CameraInput, levels: np.ndarray, max_level: int, band_content, viewer: int,
+          apothem: float) -> tuple[int | None, np.ndarray]:
+    """The cell whose band is shown (None: no band) and its sides to draw (visible, with far cells behind).
+    ``band_content(cell, apothem)``: a cache of :func:`band_sector_content` (the renderer's)."""
     if max_level < 5 or not np.any(levels == 5):
         return None, np.zeros(N_BAND_SIDES, dtype=bool)
-    content = band_content(viewer) if band_content is not None else band_sector_content(
-        data, viewer, cfg.merge_distance)
+    content = band_content(viewer, apothem) if band_content is not None else band_sector_content(
+        data, viewer, apothem)
     centre = data.placed.cell_centre[viewer, [0, 2]]
-    return viewer, visible_band_sides(camera, centre, cfg.merge_distance) & content
+    return viewer, visible_band_sides(camera, centre, apothem) & content
 
 
 def cell_levels(cfg: GrassFieldConfig, data: FieldData, camera: CameraInput, max_level: int,
-                viewer: int) -> np.ndarray:
+                viewer: int, apothem: float | None = None) -> np.ndarray:
     """(C,) level of every cell of a perspective view, -1 where culled: culling (section 3), eq. 1 with table 2
     and level 5 past the band, compiled (:func:`~systems.grass_field.kernels.cell_levels`; the same levels as
     :func:`~systems.grass_field.culling.cull_cells` + :func:`~systems.grass_field.lod.select_levels`)."""
@@ -166,7 +185,7 @@ def cell_levels(cfg: GrassFieldConfig, data: FieldData, camera: CameraInput, max
         _horizontal_half_angle(camera), float(data.cell_radius), float(cfg.near_cull_cells * cfg.cell_size),
         viewer, (float(camera.width) * cfg.length_of_interest, camera.tan_half_fov),
         np.asarray(cfg.level_thresholds, dtype=np.float64), min(max_level, 4), _BAND_NORMALS,
-        float(cfg.merge_distance), max_level >= 5)
+        band_apothem(cfg, data, camera) if apothem is None else float(apothem), max_level >= 5)
 
 
 def _plan_compiled(cfg: GrassFieldConfig, data: FieldData, camera: CameraInput, orientation: ImpostorOrientation,
@@ -175,7 +194,8 @@ def _plan_compiled(cfg: GrassFieldConfig, data: FieldData, camera: CameraInput, 
     calls on arrays of a few hundred elements)."""
     placed = data.placed
     eye = camera.position
-    levels = cell_levels(cfg, data, camera, max_level, viewer)
+    apothem = band_apothem(cfg, data, camera)
+    levels = cell_levels(cfg, data, camera, max_level, viewer, apothem)
     if data.bare.any():
         levels[data.bare] = -1  # bare areas: culled like cells out of view
     ordered, cell_counts, plant_list, counts, level_prims = kernels.plants_to_draw(
@@ -202,10 +222,10 @@ def _plan_compiled(cfg: GrassFieldConfig, data: FieldData, camera: CameraInput, 
         views = np.stack([view, view], axis=1)
         blend = np.zeros(len(impostors))
     prims[4] = 2 * len(impostors)
-    band_cell, sides = _band(cfg, data, camera, levels, max_level, band_content, viewer)
+    band_cell, sides = _band(data, camera, levels, max_level, band_content, viewer, apothem)
     prims[5] = 2 * int(sides.sum())
     return FramePlan(levels, cells, plants, impostors, face, views, blend, viewer, band_cell, sides, prims,
-                     plant_list=plant_list)
+                     plant_list=plant_list, band_apothem=apothem)
 
 
 def _real_primitives(data: FieldData) -> np.ndarray:

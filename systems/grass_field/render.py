@@ -33,7 +33,7 @@ from engine.render.feature import OPAQUE, RenderFeature, View
 from engine.render.passes import lighting_uniforms, opaque_setup, set_uniforms
 from engine.render.renderer import shader_source
 from engine.spatial import Transform
-from systems.grass_field.frame import FramePlan, band_sector_content, plan_frame
+from systems.grass_field.frame import FramePlan, band_apothem, band_sector_content, plan_frame
 from systems.grass_field.geometry import DRAW_GROUPS, LEVELS, CompactMesh, compact_mesh
 from systems.grass_field.impostor import (ATLAS_MIP_LEVELS, AtlasLayout, DiskCache, Progress, atlas_layout,
                                           band_side_frame, band_view_proj, bake_view_proj, cache_key,
@@ -113,6 +113,7 @@ class _BandEntry:
     bottom: float
     top: float
     content: np.ndarray  # (12,) sides with far cells behind them
+    apothem: float  # the band's distance from the cell's centre (frame.band_apothem of the views it serves)
     vertices: np.ndarray | None = None  # (12, 6, 5) the sides' triangles, made on first draw
 
 
@@ -175,7 +176,7 @@ class FieldGpu:
         self._band_eyes: dict = {}  # the viewer's last (x, z): the direction it moves in
         self._band_levels: dict = {}  # the eye-height step in use (see _band_key)
         self.band_buf = ctx.buffer(reserve=N_BAND_SIDES * 6 * 5 * 4)
-        self._band_content: dict[int, np.ndarray] = {}
+        self._band_content: dict[tuple[int, float], np.ndarray] = {}
         self.draw_calls = 0  # draw calls of the last draw() (bakes excluded)
         self._released = False
 
@@ -217,12 +218,12 @@ class FieldGpu:
         return vao
 
     # ----------------------------------------------------------------------------------- shared state
-    def band_content(self, cell: int) -> np.ndarray:
-        """Which band sides around ``cell`` have far cells behind them (cached per cell)."""
-        found = self._band_content.get(cell)
+    def band_content(self, cell: int, apothem: float) -> np.ndarray:
+        """Which sides of the band of ``apothem`` around ``cell`` have far cells behind them (cached)."""
+        found = self._band_content.get((cell, apothem))
         if found is None:
-            found = band_sector_content(self.data, cell, self.cfg.merge_distance)
-            self._band_content[cell] = found
+            found = band_sector_content(self.data, cell, apothem)
+            self._band_content[(cell, apothem)] = found
         return found
 
     def _lighting(self, view: View | None) -> dict[str, Any]:
@@ -395,24 +396,24 @@ class FieldGpu:
         return len(cells)
 
     # ------------------------------------------------------------------------------------ level 5 (band)
-    def _band_key(self, cell: int, eye_y: float, viewer=None) -> tuple[int, int]:
-        """(cell, eye height above the cell in steps of half a plant height).  The step in use is kept until the
+    def _band_key(self, cell: int, camera: CameraInput, viewer=None) -> tuple[int, int, float]:
+        """(cell, eye height above the cell in steps of half a plant height, the view's band apothem).  The step in use is kept until the
         eye is three quarters of a step away from it (hysteresis: an eye hovering at a step boundary, as a
         camera following a walker does, would otherwise re-bake the band at every crossing); per ``viewer``."""
         ground = float(self.data.placed.cell_centre[cell, 1])
         step = max(0.5 * self.data.plant_height, 1e-6)
-        level = (eye_y - ground) / step
+        level = (float(camera.position[1]) - ground) / step
         last = self._band_levels.get(viewer)
         if last is None or abs(level - last) > 0.75:
             last = self._band_levels[viewer] = int(np.floor(level + 0.5))
-        return cell, last
+        return cell, last, band_apothem(self.cfg, self.data, camera)
 
     def ensure_band(self, cell: int, camera: CameraInput, prefetch: int = 1, viewer=None) -> _BandEntry:
         """The band images of ``cell`` (baked now if missing), and up to ``prefetch`` neighbours baked ahead:
         those the viewer is heading for (ahead of its motion since the last frame, nearest the heading first),
         so a walk bakes about one cell per cell crossed instead of every neighbour it passes; none while it
         stands still.  ``viewer``: whose motion and height step these are (a view's name)."""
-        key = self._band_key(cell, float(camera.position[1]), viewer)
+        key = self._band_key(cell, camera, viewer)
         entry = self.band_entries.get(key)
         if entry is None:
             entry = self._bake_band(key, camera)
@@ -427,7 +428,7 @@ class FieldGpu:
                   if 0 <= r < placed.grid_z and 0 <= c < placed.grid_x and (r, c) != (row, col)]
         offset = placed.cell_centre[around][:, [0, 2]] - placed.cell_centre[cell, [0, 2]]
         heading = offset @ motion / np.maximum(np.linalg.norm(offset, axis=1), 1e-9)
-        ahead = [(around[i], key[1]) for i in np.argsort(-heading, kind="stable")
+        ahead = [(around[i], *key[1:]) for i in np.argsort(-heading, kind="stable")
                  if heading[i] > 0.5 * np.linalg.norm(motion)]  # within 60 degrees of the heading
         for neighbour in ahead:
             if prefetch <= 0:
@@ -462,17 +463,17 @@ class FieldGpu:
         self.band_fbo = self.ctx.framebuffer(color_attachments=[self.band_tex], depth_attachment=self.band_depth)
         self.band_fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
 
-    def _bake_band(self, key: tuple[int, int], camera: CameraInput) -> _BandEntry:
+    def _bake_band(self, key: tuple[int, int, float], camera: CameraInput) -> _BandEntry:
         """Capture the far surroundings of cell ``key[0]`` in 12 directions from its centre (section 6)."""
         cfg, placed = self.cfg, self.data.placed
         cell = key[0]
         centre = placed.cell_centre[cell]
         step = max(0.5 * self.data.plant_height, 1e-6)
         eye = np.array([centre[0], centre[1] + key[1] * step, centre[2]])
-        apothem = cfg.merge_distance
+        apothem = key[2]
         far = np.flatnonzero((band_distance(placed.cell_centre[:, [0, 2]], centre[[0, 2]]) >= apothem)
                              & ~self.data.bare)
-        content = self.band_content(cell)
+        content = self.band_content(cell, apothem)
         bottom, top = eye[1] - 1.0, eye[1] + 1.0
         if len(far):
             depth = band_distance(placed.cell_centre[far][:, [0, 2]], eye[[0, 2]]) - self.data.cell_radius
@@ -489,7 +490,7 @@ class FieldGpu:
             slot = self.band_entries.popitem(last=False)[1].slot  # the least recently used
         else:
             slot = len(self.band_entries)
-        entry = _BandEntry(slot, eye, bottom, top, content)
+        entry = _BandEntry(slot, eye, bottom, top, content, apothem)
         self.band_entries[key] = entry
         self._render_band(entry, far)
         self.band_bakes += 1
@@ -520,7 +521,7 @@ class FieldGpu:
             fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0, viewport=vp)
             if not entry.content[side] or count == 0:
                 continue
-            vp_mat = band_view_proj(entry.eye, self.cfg.merge_distance, side, entry.bottom, entry.top,
+            vp_mat = band_view_proj(entry.eye, entry.apothem, side, entry.bottom, entry.top,
                                     reach + 2.0 * self.data.cell_radius)
             set_uniforms(prog, **self._impostor_uniforms(vp_mat, entry.eye, False), camera_pos=tuple(entry.eye))
             vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=count)
@@ -534,8 +535,8 @@ class FieldGpu:
             sides = np.arange(N_BAND_SIDES)
             normal = np.stack([np.cos(sides * 2.0 * np.pi / N_BAND_SIDES), np.sin(sides * 2.0 * np.pi / N_BAND_SIDES)], 1)
             right = np.stack([-normal[:, 1], normal[:, 0]], axis=1)
-            _, _, half = band_side_frame(entry.eye, self.cfg.merge_distance, 0)
-            mid = entry.eye[[0, 2]] + normal * self.cfg.merge_distance
+            _, _, half = band_side_frame(entry.eye, entry.apothem, 0)
+            mid = entry.eye[[0, 2]] + normal * entry.apothem
             cx = np.array([0, 1, 0, 1, 1, 0], dtype=np.float64)
             cy = np.array([0, 0, 1, 0, 1, 1], dtype=np.float64)
             xz = mid[:, None, :] + ((2.0 * cx - 1.0) * half)[None, :, None] * right[:, None, :]
@@ -577,7 +578,7 @@ class FieldGpu:
                                               plan.impostor_blend, 4)
         band_vertices = 0
         if plan.band_cell is not None and plan.band_sides.any():
-            entry = self.band_entries[self._band_key(plan.band_cell, float(camera.position[1]), viewer)]
+            entry = self.band_entries[self._band_key(plan.band_cell, camera, viewer)]
             band_vertices = self._band_quads(entry, plan.band_sides & entry.content)
         # levels 0-3: one plant list (each level's plants nearest first, for early depth rejection), one draw
         # per level and primitive type

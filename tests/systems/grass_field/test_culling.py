@@ -160,3 +160,29 @@ def test_bare_areas_must_be_ordered():
 
     with pytest.raises(ValidationError, match=r"bare_areas\[1\].*x_min < x_max"):
         paper_config(bare_areas=[[0.0, 0.0, 1.0, 1.0], [5.0, 0.0, 2.0, 1.0]])
+
+
+def test_the_band_replaces_only_cells_eq1_puts_at_level_4_in_wide_views():
+    """Section 6: the merged band stands beyond the 3→4 distance.  At 640 px that distance (369) is well inside
+    the paper's merge distance (800); at 1920 and 3840 px (1108, 2215) it is not, and the band moves out with it
+    instead of swallowing cells that eq. 1 wants drawn as geometry (36 and 225 such cells before).  Compiled and
+    numpy plans alike."""
+    from systems.grass_field.frame import band_apothem
+
+    cfg = paper_config(grid_x=40, grid_z=40)
+    _, data = make_field(cfg)
+    for width, expect_moved in [(640, False), (1920, True), (3840, True)]:
+        for position, yaw in [((0.0, 30.0, 0.0), 20.0), ((-700.0, 30.0, -600.0), 45.0)]:
+            cam = level_camera(position, yaw, width=width)
+            apothem = band_apothem(cfg, data, cam)
+            assert (apothem > cfg.merge_distance) == expect_moved
+            for compiled in (True, False):
+                plan = plan_frame(cfg, data, cam, ImpostorOrientation(data.cell_count), compiled=compiled)
+                plain = plan_frame(cfg, data, cam, ImpostorOrientation(data.cell_count), max_level=4,
+                                   compiled=compiled)
+                banded = plan.levels == 5
+                assert plan.band_apothem == apothem
+                assert (plain.levels[banded] == 4).all()  # never a cell eq. 1 puts at levels 0-3
+                assert np.array_equal(plan.levels[~banded], plain.levels[~banded])
+                if width == 1920 and position[0] == -700.0:
+                    assert banded.any() and (plan.levels == 4).any()  # both still in use
