@@ -171,6 +171,7 @@ class FieldGpu:
         self.band_layout: AtlasLayout | None = None
         self.band_tex: moderngl.Texture | None = None
         self.band_fbo: moderngl.Framebuffer | None = None
+        self.band_depth: moderngl.Renderbuffer | None = None
         self.band_bakes = 0  # viewer cells whose 12 images were captured
         # per viewer (a view's name; each camera moves and holds its height step on its own):
         self._band_eyes: dict = {}  # the viewer's last (x, z): the direction it moves in
@@ -413,6 +414,7 @@ class FieldGpu:
         those the viewer is heading for (ahead of its motion since the last frame, nearest the heading first),
         so a walk bakes about one cell per cell crossed instead of every neighbour it passes; none while it
         stands still.  ``viewer``: whose motion and height step these are (a view's name)."""
+        self._band_resolution(camera)
         key = self._band_key(cell, camera, viewer)
         entry = self.band_entries.get(key)
         if entry is None:
@@ -443,16 +445,33 @@ class FieldGpu:
             prefetch -= 1
         return entry
 
-    def _band_atlas(self, camera: CameraInput, height_ratio: float) -> None:
-        if self.band_tex is not None:
-            return
+    def _band_tile_width(self, camera: CameraInput) -> int:
+        """Texels across one band side for this view: the side's width on screen seen from the viewer's cell
+        (W tan 15° / tan θ: the same at every apothem), times ``band_resolution_scale``."""
         cfg = self.cfg
         half = cfg.merge_distance * np.tan(np.pi / N_BAND_SIDES)
         if camera.ortho_pixels_per_unit is not None:
             per_unit = 256.0 / (2.0 * half)
         else:
             per_unit = camera.width / (2.0 * cfg.merge_distance * camera.tan_half_fov)
-        tw = int(np.clip(np.ceil(2.0 * half * per_unit * cfg.band_resolution_scale), 16, 2048))
+        return int(np.clip(np.ceil(2.0 * half * per_unit * cfg.band_resolution_scale), 16, 2048))
+
+    def _band_resolution(self, camera: CameraInput) -> None:
+        """A view that needs band images over 1.5 times as wide as the atlas holds (a window made larger) gets a
+        new atlas at its resolution; the cached bands are baked again as they are needed.  It never shrinks, so
+        two views of different sizes do not make it thrash."""
+        if self.band_tex is None or self._band_tile_width(camera) <= 1.5 * self.band_layout.tile_w:
+            return
+        for obj in (self.band_tex, self.band_fbo, self.band_depth):
+            obj.release()
+        self.band_tex = self.band_fbo = self.band_depth = None
+        self.band_entries.clear()
+
+    def _band_atlas(self, camera: CameraInput, height_ratio: float) -> None:
+        if self.band_tex is not None:
+            return
+        cfg = self.cfg
+        tw = self._band_tile_width(camera)
         th = int(np.clip(np.ceil(tw * height_ratio * 1.25), 8, 512))
         max_size = min(int(self.ctx.info.get("GL_MAX_TEXTURE_SIZE", 8192)), MAX_ATLAS_SIDE)
         self.band_layout = atlas_layout(cfg.band_cache_cells * N_BAND_SIDES, tw, th, max_size, pad=1)
@@ -615,7 +634,7 @@ class FieldGpu:
             return
         self._released = True
         objects = [self.instance_buf, self.command_buf, self.impostor_buf, self.bounds_tex, self.band_buf, self.atlas,
-                   self.band_tex, self.band_fbo, getattr(self, "band_depth", None)]
+                   self.band_tex, self.band_fbo, self.band_depth]
         objects += list(self._vaos.values())  # the programs belong to the renderer (shared between fields)
         objects += list(self.mesh_vbo.values()) + list(self.mesh_ibo.values())
         for obj in objects:

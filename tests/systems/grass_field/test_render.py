@@ -141,6 +141,16 @@ def test_bands_are_prefetched_ahead_of_the_viewer_and_the_height_step_has_hyster
             gpu.ensure_band(cell, at(base[0] + 0.1 * step, base[2]))
             gpu.ensure_band(cell, at(base[0] - 0.3 * step, base[2] + 0.2 * step, high), viewer="high")
         assert gpu.band_bakes == bakes and gpu._band_levels["high"] == gpu._band_levels[None] + 3
+        # a window made twice as wide gets band images at its resolution (baked again); a smaller view after it
+        # does not shrink them back (two views of different widths would re-bake every frame)
+        narrow = at(base[0] + 0.1 * step, base[2])
+        tile, bakes = gpu.band_layout.tile_w, gpu.band_bakes
+        wide = replace(narrow, width=4 * narrow.width)
+        gpu.ensure_band(cell, wide)
+        assert gpu.band_layout.tile_w >= 3 * tile and gpu.band_bakes == bakes + 1
+        gpu.ensure_band(cell, narrow)
+        gpu.ensure_band(cell, wide)
+        assert gpu.band_layout.tile_w >= 3 * tile and gpu.band_bakes == bakes + 1
     finally:
         renderer.release()
         app.renderer = None
