@@ -21,9 +21,9 @@ def has_display() -> bool:
     return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
 
-def attach_input_source(app: App, record: Path | None, replay: Path | None) -> InputSource | None:
+def attach_input_source(app: App, record: Path | None, replay: Path | InputReplay | None) -> InputSource | None:
     recorder = InputRecorder({"scene": str(app.scene_path), "seed": app.seed}) if record else None
-    replayer = InputReplay(replay) if replay else None
+    replayer = replay if isinstance(replay, InputReplay) or replay is None else InputReplay(replay)
     if recorder is None and replayer is None:
         return None
     source = InputSource(recorder, replayer)
@@ -37,12 +37,24 @@ def run_command(args: argparse.Namespace) -> int:
         print(f"error: --screenshot-every N DIR: N must be a whole number of frames >= 1, got {every[0]!r}",
               file=sys.stderr)
         return 1
-    app = App(args.scene, seed=args.seed, strict=args.strict)
+    seed, replay = args.seed, None
+    if args.replay:
+        try:
+            replay = InputReplay(args.replay)
+            seed = replay_seed(args.replay, replay.meta, args.seed)
+        except (OSError, ValueError) as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 1
+        recorded = replay.meta.get("scene")
+        if isinstance(recorded, str) and Path(recorded).name != Path(args.scene).name:
+            log.warning("%s was recorded in %s, not %s: the replay will not reproduce that run", args.replay,
+                        recorded, args.scene)
+    app = App(args.scene, seed=seed, strict=args.strict)
     if args.print_schedule:
         print(app.schedule.describe(app.clock.dt))
         return 0
     try:
-        source = attach_input_source(app, args.record, args.replay)
+        source = attach_input_source(app, args.record, replay)
     except (OSError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1
@@ -66,6 +78,22 @@ def run_command(args: argparse.Namespace) -> int:
     if args.hash:
         print(app.state_hash())
     return 0
+
+
+def replay_seed(path: Path, meta: dict, asked: int | None) -> int | None:
+    """The seed a replay runs with: the recording's (its header's ``seed``), so that it reproduces the recorded
+    run; ``--seed`` may repeat it but not contradict it (the run would not be the one recorded)."""
+    from engine.app import MAX_SEED
+
+    if "seed" not in meta:
+        return asked
+    seed = meta["seed"]
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
+        raise ValueError(f"{path}:1: seed: expected an integer in [0, {MAX_SEED}], got {seed!r}")
+    if asked is not None and asked != seed:
+        raise ValueError(f"{path}:1: the recording was made with seed {seed}, not --seed {asked}; leave --seed out "
+                         "to replay it")
+    return seed
 
 
 def graph_command(args: argparse.Namespace) -> int:

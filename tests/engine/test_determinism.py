@@ -83,6 +83,12 @@ def test_record_and_replay_reproduce_the_final_hash(tmp_path):
     cmd = [sys.executable, "-m", "engine", "run", SCENE, "--no-render", "--seed", "2", "--replay", str(rec), "--hash"]
     out = subprocess.run(cmd, capture_output=True, text=True, check=True).stdout.strip().splitlines()[-1]
     assert out == recorded
+    # without --seed (the README's command) the replay runs with the recording's seed, not the scene's
+    out = subprocess.run(cmd[:6] + cmd[8:], capture_output=True, text=True, check=True).stdout.strip().splitlines()[-1]
+    assert out == recorded
+    # a --seed that contradicts the recording is an error naming the file, not another run's hash
+    bad = subprocess.run(cmd[:7] + ["3"] + cmd[8:], capture_output=True, text=True)
+    assert bad.returncode == 1 and f"{rec}:1: the recording was made with seed 2, not --seed 3" in bad.stderr
 
 
 def test_derived_generator_is_the_stream_and_stays_unregistered():
