@@ -21,7 +21,7 @@ from typing import Any
 
 from engine.builtin import InputSource
 from engine.config import ConfigError, Problem
-from engine.input import InputQueue, InputState
+from engine.input import InputQueue, InputState, KeySet
 from engine.registry import Registry, RegistryError, default_registry
 from engine.scene import SceneConfig, ScenePlan, plan_scene, read_scene, spawn_plan
 from engine.schedule import FRAME_STAGES, TICK_STAGES, FixedClock, Stage
@@ -160,7 +160,7 @@ class App:
             self.world.insert_resource(queue)
         fresh = self.world.try_resource(InputState)
         if held is not None and fresh is not None:  # keys and buttons still held stay held (not pressed again)
-            fresh.keys_down = set(held.keys_down)
+            fresh.keys_down = KeySet(held.keys_down)
             fresh.mouse = held.mouse
         self.started = False
         self.renderer = renderer

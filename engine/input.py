@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterable, Iterator
 
 
 @dataclass(frozen=True)
@@ -40,13 +40,56 @@ class InputQueue:
         return events
 
 
+class KeySet:
+    """A set of key and button names that iterates in the order they were added.  A Python ``set`` of strings
+    iterates in an order that depends on the process's hash seed, so a script looping over this tick's presses
+    would replay differently in another process; this one iterates the same everywhere.  Compares equal to a
+    set with the same names."""
+
+    __slots__ = ("_keys",)
+
+    def __init__(self, keys: Iterable[str] = ()) -> None:
+        self._keys = dict.fromkeys(keys)
+
+    def add(self, key: str) -> None:
+        self._keys[key] = None
+
+    def discard(self, key: str) -> None:
+        self._keys.pop(key, None)
+
+    def __contains__(self, key: object) -> bool:
+        return key in self._keys
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._keys)
+
+    def __len__(self) -> int:
+        return len(self._keys)
+
+    def __eq__(self, other: object) -> bool:
+        if isinstance(other, KeySet):
+            return self._keys.keys() == other._keys.keys()
+        if isinstance(other, (set, frozenset)):
+            return self._keys.keys() == other
+        return NotImplemented
+
+    __hash__ = None  # mutable, like set
+
+    def __repr__(self) -> str:
+        return f"KeySet({list(self._keys)!r})"
+
+    def __hash_state__(self) -> set[str]:
+        return set(self._keys)  # hashed as the set it was (the order of one tick's presses is not state)
+
+
 @dataclass
 class InputState:
-    """What scripts read: held keys and buttons, this tick's presses, the mouse."""
+    """What scripts read: held keys and buttons, this tick's presses, the mouse.  The key collections are
+    :class:`KeySet`: ``in`` tests, and iteration in the order the keys went down."""
 
-    keys_down: set[str] = field(default_factory=set)
-    pressed: set[str] = field(default_factory=set)
-    released: set[str] = field(default_factory=set)
+    keys_down: KeySet = field(default_factory=KeySet)
+    pressed: KeySet = field(default_factory=KeySet)
+    released: KeySet = field(default_factory=KeySet)
     mouse: tuple[float, float] = (0.0, 0.0)
     mouse_delta: tuple[float, float] = (0.0, 0.0)
     scroll: float = 0.0
@@ -62,8 +105,8 @@ class InputState:
 
     def apply(self, events: list[InputEvent]) -> None:
         """Start a new tick and fold ``events`` in (buttons share the key sets, named 'mouse_left' ...)."""
-        self.pressed = set()
-        self.released = set()
+        self.pressed = KeySet()
+        self.released = KeySet()
         dx = dy = 0.0
         self.scroll = 0.0
         for ev in events:
