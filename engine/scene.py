@@ -108,6 +108,11 @@ class ScenePlan:
     warnings: list[Problem] = field(default_factory=list)  # legal but probably not meant (Registry.add_scene_check)
 
 
+# The engine's own presets (configs/effects/ beside the engine package): a scene's preset name that its own
+# configs root does not hold resolves here, so a game kept in its own folder can use the stock presets.
+STOCK_CONFIGS = Path(__file__).resolve().parents[1] / "configs"
+
+
 def find_configs_root(path: Path) -> Path:
     """The nearest ancestor folder named ``configs``; otherwise the scene's own folder."""
     path = Path(path).resolve()
@@ -280,11 +285,14 @@ def _load_preset(spec, preset_name: Any, file: Path, text: str, key: tuple, root
     rel = preset_name if "/" in preset_name else f"{spec.preset_dir}/{preset_name}"
     try:
         preset_file = resolve_inside(Path(root) / "effects", rel, ".toml")
+        stock = resolve_inside(STOCK_CONFIGS / "effects", rel, ".toml")
     except ValueError as exc:
         raise ConfigError([Problem(message=str(exc), value=preset_name, **where)]) from None
+    if not preset_file.is_file() and stock.is_file():
+        preset_file = stock  # the game's configs/ has no such preset: the engine's stock one
     if not preset_file.is_file():
-        folder = preset_file.parent
-        available = sorted(p.stem for p in folder.glob("*.toml")) if folder.is_dir() else []
+        available = sorted({p.stem for folder in (preset_file.parent, stock.parent) if folder.is_dir()
+                            for p in folder.glob("*.toml")})
         close = suggest(preset_file.stem, available)
         raise ConfigError([Problem(message=f"preset not found: {preset_file} (available: "
                                    f"{', '.join(available) or 'none'})", value=preset_name,

@@ -127,3 +127,25 @@ def test_validate_cli_exit_codes_without_traceback(tmp_path):
     res = subprocess.run([sys.executable, "-m", "engine", "validate", str(good.parent)], capture_output=True, text=True)
     assert res.returncode == 1
     assert "Traceback" not in res.stderr and "did you mean 'position'" in res.stderr and "bad.toml:3" in res.stderr
+
+
+def test_a_game_in_its_own_folder_uses_the_stock_presets_and_its_own_first(tmp_path):
+    """A scene outside the engine's configs/ names a stock preset its own effects/ does not hold: the engine's is
+    used; a preset of its own with the same name wins; a typo lists both folders' presets."""
+    from engine.scene import STOCK_CONFIGS
+
+    game = tmp_path / "mygame"
+    game.mkdir()
+    scene = game / "scene.toml"
+    scene.write_text('[[entities]]\n[entities.components.WaterSurface]\npreset = "water_surface/calm_pond"\n')
+    plan = plan_scene(scene, REGISTRY)
+    assert plan.configs_root == game and STOCK_CONFIGS / "effects" / "water_surface" / "calm_pond.toml" in plan.files
+    own = game / "effects" / "water_surface"
+    own.mkdir(parents=True)
+    (own / "calm_pond.toml").write_text("wave_speed = 0.5\n")
+    (own / "mine.toml").write_text("wave_speed = 0.5\n")
+    plan = plan_scene(scene, REGISTRY)
+    assert own / "calm_pond.toml" in plan.files and plan.entities[0].components[0][1].wave_speed == 0.5
+    scene.write_text('[[entities]]\n[entities.components.WaterSurface]\npreset = "water_surface/calm_pnd"\n')
+    (p,) = problems(scene)
+    assert "preset not found" in p.message and p.suggestion == "calm_pond" and "mine" in p.message
