@@ -13,6 +13,7 @@ from pathlib import Path
 from engine.config import ConfigError, Problem, read_toml, validate
 from engine.registry import Registry, RegistryError, default_registry
 from engine.script import ScriptError
+from engine.state import StateHashError
 
 
 def _int_in(low: int, high: int):
@@ -95,6 +96,9 @@ def main(argv: list[str] | None = None) -> int:
             return graph_command(args)
     except ConfigError as exc:
         print(exc, file=sys.stderr)
+        return 1
+    except StateHashError as exc:  # a script or plugin keeping something that is not state: theirs to fix
+        print(f"error: {exc}", file=sys.stderr)
         return 1
     except RegistryError as exc:
         print(f"error: {exc}", file=sys.stderr)

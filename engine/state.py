@@ -46,32 +46,70 @@ def _feed(h: Any, obj: Any) -> None:
         _feed(h, obj.bit_generator.state)
     elif hasattr(obj, "__hash_state__"):
         h.update(f"o:{type(obj).__qualname__}|".encode())
-        _feed(h, obj.__hash_state__())
+        try:
+            _feed(h, obj.__hash_state__())
+        except StateHashError as exc:
+            exc.path.append(f" ({type(obj).__name__})")
+            raise
     elif isinstance(obj, BaseModel):
         h.update(f"m:{type(obj).__qualname__}|".encode())
         _feed(h, {k: getattr(obj, k) for k in type(obj).model_fields})
     elif dataclasses.is_dataclass(obj) and not isinstance(obj, type):
         h.update(f"d:{type(obj).__qualname__}|".encode())
-        for f in dataclasses.fields(obj):
-            if f.metadata.get("hash", True):
-                h.update(f.name.encode())
-                _feed(h, getattr(obj, f.name))
+        name = ""
+        try:
+            for f in dataclasses.fields(obj):
+                if f.metadata.get("hash", True):
+                    name = f.name
+                    h.update(name.encode())
+                    _feed(h, getattr(obj, name))
+        except StateHashError as exc:
+            exc.path.append(f".{name}")
+            raise
     elif isinstance(obj, dict):
         h.update(f"{{{len(obj)}|".encode())
-        for key in sorted(obj, key=lambda k: (type(k).__name__, repr(k))):
-            _feed(h, key)
-            _feed(h, obj[key])
+        key = None
+        try:
+            for key in sorted(obj, key=lambda k: (type(k).__name__, repr(k))):
+                _feed(h, key)
+                _feed(h, obj[key])
+        except StateHashError as exc:
+            exc.path.append(f".{key}" if isinstance(key, str) and key.isidentifier() else f"[{key!r}]")
+            raise
     elif isinstance(obj, (list, tuple)):
         h.update(f"[{len(obj)}|".encode())
-        for item in obj:
-            _feed(h, item)
+        i = 0
+        try:
+            for i, item in enumerate(obj):
+                _feed(h, item)
+        except StateHashError as exc:
+            exc.path.append(f"[{i}]")
+            raise
     elif isinstance(obj, (set, frozenset)):
         _feed(h, sorted(obj, key=lambda k: (type(k).__name__, repr(k))))
     elif hasattr(obj, "__dict__"):
         h.update(f"o:{type(obj).__qualname__}|".encode())
         _feed(h, vars(obj))
     else:
-        raise TypeError(f"cannot hash state of type {type(obj).__qualname__}")
+        raise StateHashError(type(obj).__qualname__)
+
+
+class StateHashError(TypeError):
+    """Something in the simulation state cannot be hashed (a script keeping a generator, a module, the world);
+    ``path`` leads to it, e.g. ``entity 3 ('player') Scripts.slots[0] (ScriptSlot)[3] (Player).world``."""
+
+    def __init__(self, what: str) -> None:
+        super().__init__(what)
+        self.what = what
+        self.path: list[str] = []  # innermost last, built while the error unwinds
+
+    def __str__(self) -> str:
+        where = "".join(reversed(self.path)).strip()
+        return (f"cannot hash state of type {self.what} at {where or 'the top'}: keep objects that are not "
+                "simulation state out of components, state resources and scripts (a script may leave attributes "
+                "out with __hash_state__; a dataclass field with metadata={'hash': False})")
+
+
 
 
 def digest(obj: Any) -> str:
@@ -87,15 +125,28 @@ def state_hash(world: World) -> str:
     _feed(h, world.tick)
     _feed(h, world.seed)
     _feed(h, world._next_id)  # the next entity id: it decides the ids, and so the order, of entities to come
-    for entity, comps in world.iter_state():
-        _feed(h, entity)
-        for comp in comps:
-            h.update(f"c:{type(comp).__module__}.{type(comp).__qualname__}|".encode())
-            _feed(h, comp)
-    for resource in world.state_resources():
-        _feed(h, resource)
+    part = None
+    try:
+        for entity, comps in world.iter_state():
+            _feed(h, entity)
+            for part in comps:
+                h.update(f"c:{type(part).__module__}.{type(part).__qualname__}|".encode())
+                _feed(h, part)
+        entity = None
+        for part in world.state_resources():
+            _feed(h, part)
+    except StateHashError as exc:
+        where = "resource" if entity is None else _entity_label(world, entity)
+        exc.path.append(f"{where} {type(part).__name__}")
+        raise
     _feed(h, world.random.states())
     return h.hexdigest()
+
+
+def _entity_label(world: World, entity: int) -> str:
+    from engine.script import entity_label
+
+    return entity_label(world, entity)
 
 
 _SNAPSHOT_FIELDS = ("_next_id", "_entities", "_stores", "_resources", "_state_resources", "tick", "random",

@@ -220,3 +220,27 @@ def test_context_reaches_other_entities_resources_and_the_ground(tmp_path):
     ctx.despawn(crate)
     app.world.commands.apply()
     assert not ctx.alive(crate) and ctx.find("crate") is None
+
+
+def test_a_script_keeping_something_that_is_not_state_is_named_when_hashing(tmp_path):
+    """A script that stores a generator (or the world) cannot be hashed; the error says where: the entity, the
+    script's class and the attribute, and how to keep it out (was a bare 'cannot hash state of type generator')."""
+    from engine.state import StateHashError
+
+    @script("test.keeps_a_generator")
+    class KeepsAGenerator(Script):
+        def on_start(self) -> None:
+            self.counter = 3
+            self.ticks = (i for i in range(10))
+
+    reg = default_registry()
+    reg.add_script(KeepsAGenerator)
+    scene = tmp_path / "s.toml"
+    scene.write_text("[[entities]]\nname = 'hero'\nscripts = [{ name = 'test.keeps_a_generator' }]\n")
+    app = App(scene, registry=reg, strict=True)
+    app.step(1)
+    with pytest.raises(StateHashError) as err:
+        app.state_hash()
+    text = str(err.value)
+    assert "type generator at entity 1 ('hero') Scripts.slots[0] (ScriptSlot)[3] (KeepsAGenerator).ticks" in text
+    assert "__hash_state__" in text
