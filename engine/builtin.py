@@ -32,6 +32,28 @@ class Name:
     value: str
 
 
+def entity_ref(world: World, ref, param: str = "entity") -> int:
+    """The entity a command argument names: an id, or the ``name`` the scene (or a prefab) gave it (the lowest
+    id of that name).  A name nobody has raises ValueError with the nearest name; ``param``: the argument's name
+    for the message."""
+    if isinstance(ref, str):
+        from engine.config import suggest
+
+        found = None
+        names = []
+        for e, (name,) in world.query(Name):
+            names.append(name.value)
+            if name.value == ref and found is None:
+                found = e
+        if found is None:
+            close = suggest(ref, names)
+            raise ValueError(f"{param}: no entity named '{ref}'" + (f"; did you mean '{close}'?" if close else ""))
+        return found
+    if isinstance(ref, (bool, float)) or not isinstance(ref, (int, np.integer)):
+        raise ValueError(f"{param}: expected an entity id or name, got {ref!r}")
+    return int(ref)
+
+
 HalfExtents3 = Annotated[list[Annotated[float, Field(ge=0.0, le=10000.0)]], Field(min_length=3, max_length=3),
                          AfterValidator(_as_tuple)]
 Scale3 = Annotated[list[Annotated[float, Field(ge=0.001, le=1000.0)]], Field(min_length=3, max_length=3),

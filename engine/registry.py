@@ -186,7 +186,12 @@ def _unknown(kind: str, name: str, known: Iterable[str]) -> RegistryError:
     close = suggest(name, known)
     hint = f"; did you mean '{close}'?" if close else ""
     problem = f"unknown {kind} '{name}'"
-    return RegistryError(f"{problem}{hint} (registered: {', '.join(sorted(known)) or 'none'})", problem, close)
+    how = ""
+    if kind in ("script", "command") and not close:  # likely one of the game's own, not registered yet
+        how = (f"; a {kind} is registered by a plugin's build(registry) (registry.add_{kind}), and a plugin is "
+               f"found through the '{ENTRY_POINT_GROUP}' entry points of an installed package (docs/modding.md, "
+               "section 3)")
+    return RegistryError(f"{problem}{hint} (registered: {', '.join(sorted(known)) or 'none'}){how}", problem, close)
 
 
 def discover_plugins(names: Iterable[str] | None = None) -> list[Plugin]:

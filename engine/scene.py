@@ -10,7 +10,7 @@
     [entities.components.Transform]
     position = [0.0, 1.0, 0.0]
     [entities.components.EnergyWaveEmitter]
-    preset = "energy_wave/default"   # configs/effects/energy_wave/default.toml
+    preset = "energy_wave/reference"   # configs/effects/energy_wave/reference.toml
     beam_speed = 30.0                # overrides the preset
 
 Loading validates everything first and reports every problem of every file at once; only a scene

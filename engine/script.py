@@ -148,7 +148,19 @@ class ScriptContext:
     def call(self, command: str, **kwargs: Any) -> Any:
         """Run a command a plugin published (for example ``"energy_wave.fire"``)."""
         registry = self.world.resource(ScriptRuntime).registry
-        return registry.command(command)(self.world, self.entity, **kwargs)
+        fn = registry.command(command)
+        try:
+            return fn(self.world, self.entity, **kwargs)
+        except TypeError:
+            import inspect
+
+            signature = inspect.signature(fn)
+            try:
+                signature.bind(self.world, self.entity, **kwargs)
+            except TypeError as exc:  # the call's arguments, not the command's own bug: say what it takes
+                takes = ", ".join(str(p) for p in list(signature.parameters.values())[2:])
+                raise TypeError(f"command '{command}': {exc}; it takes ({takes})") from None
+            raise
 
 
 class Script:

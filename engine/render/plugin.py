@@ -46,6 +46,9 @@ def _set_hud(world: World, entity: int, lines=None, center=None, help=None, show
     """``ctx.call("render.hud", lines=[...], center="...", help=[...], show_help=True, show_fps=True)``: set the
     HUD's fields that are given (the others stay)."""
     hud = world.resource(Hud)
+    if isinstance(lines, str) or isinstance(help, str):  # list("hello") would show one letter per line
+        raise ValueError("render.hud: lines and help are lists of strings (one per line), got a single string; "
+                         "wrap it in a list: lines=[\"...\"]")
     if lines is not None:
         hud.lines = list(lines)
     if center is not None:
@@ -62,7 +65,9 @@ def _camera_command(world: World, entity: int, camera: int | None = None, **valu
     """``ctx.call("render.camera", camera=other, viewport=(x, y, w, h), update_interval=2)``: change fields of a
     Camera's config (the caller's own camera when ``camera`` is omitted), validated like the scene's TOML: a bad
     value raises a ConfigError naming the field and keeps the camera as it was.  Returns the new config."""
-    target = entity if camera is None else int(camera)
+    from engine.builtin import entity_ref
+
+    target = entity if camera is None else entity_ref(world, camera, "camera")
     cam = world.get(target, Camera)
     changes = {k: list(v) if isinstance(v, tuple) else v for k, v in values.items()}
     merged = cam.config.model_dump(mode="json", warnings=False) | changes

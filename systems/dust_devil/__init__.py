@@ -70,9 +70,14 @@ def window_size(world) -> tuple[int, int]:
 def _target(world, entity, target):
     """The dust devil a command acts on: ``target``, else the calling entity, else the first one."""
     if target is not None:
-        if not world.has(int(target), Transform, DustDevilConfig, DustDevilState):
+        from engine.builtin import entity_ref
+
+        try:
+            entity = entity_ref(world, target, "target")
+        except ValueError as exc:
+            raise DragError(str(exc)) from None
+        if not world.has(entity, Transform, DustDevilConfig, DustDevilState):
             raise DragError(f"entity {target} is not a dust devil (needs Transform and DustDevil)")
-        entity = int(target)
     elif not world.has(entity, Transform, DustDevilConfig, DustDevilState):
         found = world.query(Transform, DustDevilConfig, DustDevilState)
         if not found:

@@ -28,17 +28,19 @@ from .simulate import simulate_system
 __all__ = ["plugin", "fire", "set_emitting", "set_pattern", "configure"]
 
 
-def _target(world: World, entity: int, emitter: int | None) -> tuple[int, EnergyWaveEmitter, EnergyWaveState]:
-    target = entity if emitter is None else int(emitter)
+def _target(world: World, entity: int, emitter: int | str | None) -> tuple[int, EnergyWaveEmitter, EnergyWaveState]:
+    from engine.builtin import entity_ref
+
+    target = entity if emitter is None else entity_ref(world, emitter, "emitter")
     cfg = world.try_get(target, EnergyWaveEmitter)
     state = world.try_get(target, EnergyWaveState)
     if cfg is None or state is None:
-        raise ValueError(f"entity {target} has no EnergyWaveEmitter (pass emitter=<entity> to address another one)")
+        raise ValueError(f"entity {target} has no EnergyWaveEmitter (pass emitter=<entity id or name> to address another one)")
     return target, cfg, state
 
 
 def fire(world: World, entity: int, duration: float | None = None, count: int | None = None,
-         emitter: int | None = None) -> None:
+         emitter: int | str | None = None) -> None:
     """Command ``energy_wave.fire``: start a burst (see the module docstring)."""
     _, cfg, state = _target(world, entity, emitter)
     seconds = float(duration) if duration is not None else cfg.burst_duration
@@ -53,13 +55,13 @@ def fire(world: World, entity: int, duration: float | None = None, count: int | 
     state.burst_time_left = seconds
 
 
-def set_emitting(world: World, entity: int, emitting: bool = True, emitter: int | None = None) -> None:
+def set_emitting(world: World, entity: int, emitting: bool = True, emitter: int | str | None = None) -> None:
     """Command ``energy_wave.set_emitting``: continuous emission on or off."""
     _, _, state = _target(world, entity, emitter)
     state.emitting = bool(emitting)
 
 
-def configure(world: World, entity: int, emitter: int | None = None, **fields: Any) -> EnergyWaveEmitter:
+def configure(world: World, entity: int, emitter: int | str | None = None, **fields: Any) -> EnergyWaveEmitter:
     """Command ``energy_wave.configure``: replace fields of the emitter's config; raises ConfigError when invalid."""
     target, cfg, _ = _target(world, entity, emitter)
     data = {**cfg.model_dump(mode="json", warnings=False), **fields}
@@ -68,7 +70,7 @@ def configure(world: World, entity: int, emitter: int | None = None, **fields: A
     return new
 
 
-def set_pattern(world: World, entity: int, pattern: str = "A", emitter: int | None = None) -> EnergyWaveEmitter:
+def set_pattern(world: World, entity: int, pattern: str = "A", emitter: int | str | None = None) -> EnergyWaveEmitter:
     """Command ``energy_wave.set_pattern``: make every hit particle join ``pattern`` (A–H) from now on."""
     key = str(pattern).strip().upper()
     if key not in PATTERN_PARAMETERS:

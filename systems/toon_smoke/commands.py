@@ -19,17 +19,9 @@ from systems.toon_smoke.simulate import _geometry
 
 def _volume(world: World, entity: int, volume: int | str | None) -> tuple[int, ToonSmokeVolumeConfig,
                                                                           ToonSmokeState]:
-    target = entity
-    if isinstance(volume, str):
-        from engine.builtin import Name
+    from engine.builtin import entity_ref
 
-        names = {name.value: e for e, (name,) in world.query(Name)}
-        if volume not in names:
-            close = suggest(volume, names)
-            raise ValueError(f"no entity named '{volume}'" + (f"; did you mean '{close}'?" if close else ""))
-        target = names[volume]
-    elif volume is not None:
-        target = int(volume)
+    target = entity if volume is None else entity_ref(world, volume, "volume")
     cfg = world.try_get(target, ToonSmokeVolumeConfig)
     state = world.try_get(target, ToonSmokeState)
     if cfg is None or state is None:

@@ -16,6 +16,7 @@ import numpy as np
 from pydantic import Field
 
 from components.water_surface import RigidBody, RigidBodyState, WaterState
+from engine.builtin import entity_ref
 from engine.config import ConfigModel, Vec3
 from engine.exact import length
 from engine.registry import RegistryError
@@ -34,8 +35,8 @@ def _vec(value, name: str) -> np.ndarray:
     return array
 
 
-def _body(world: World, entity: int, target: int | None) -> int:
-    target = entity if target is None else int(target)
+def _body(world: World, entity: int, target: int | str | None) -> int:
+    target = entity if target is None else entity_ref(world, target, "target")
     if not world.has(target, RigidBodyState, Transform):
         raise RegistryError(f"entity {target} has no RigidBody (the rigid_body commands act on rigid bodies)")
     return target
@@ -43,21 +44,22 @@ def _body(world: World, entity: int, target: int | None) -> int:
 
 def _water(world: World, target: int | None) -> int:
     if target is not None:
-        if not world.has(int(target), WaterState):
+        found = entity_ref(world, target, "target")
+        if not world.has(found, WaterState):
             raise RegistryError(f"entity {target} has no WaterSurface")
-        return int(target)
+        return found
     found = world.query(WaterState)
     if not found:
         raise RegistryError("there is no WaterSurface in this world")
     return found[0][0]
 
 
-def apply_impulse(world: World, entity: int, impulse, point=None, target: int | None = None) -> None:
+def apply_impulse(world: World, entity: int, impulse, point=None, target: int | str | None = None) -> None:
     body = _body(world, entity, target)
     add_impulse(world, body, _vec(impulse, "impulse"), None if point is None else _vec(point, "point"))
 
 
-def apply_force(world: World, entity: int, force, point=None, target: int | None = None) -> None:
+def apply_force(world: World, entity: int, force, point=None, target: int | str | None = None) -> None:
     body = _body(world, entity, target)
     state = world.get(body, RigidBodyState)
     f = _vec(force, "force")
@@ -66,7 +68,7 @@ def apply_force(world: World, entity: int, force, point=None, target: int | None
         state.torque = state.torque + cross(_vec(point, "point") - world.get(body, Transform).position, f)
 
 
-def set_velocity(world: World, entity: int, velocity=None, angular_velocity=None, target: int | None = None) -> None:
+def set_velocity(world: World, entity: int, velocity=None, angular_velocity=None, target: int | str | None = None) -> None:
     state = world.get(_body(world, entity, target), RigidBodyState)
     if velocity is not None:
         state.velocity = _vec(velocity, "velocity")
@@ -74,11 +76,11 @@ def set_velocity(world: World, entity: int, velocity=None, angular_velocity=None
         state.angular_velocity = _vec(angular_velocity, "angular_velocity")
 
 
-def splash(world: World, entity: int, point, height: float = 0.1, target: int | None = None) -> None:
+def splash(world: World, entity: int, point, height: float = 0.1, target: int | str | None = None) -> None:
     add_splash(world, _water(world, target), _vec(point, "point"), float(height))
 
 
-def height_at(world: World, entity: int, point, target: int | None = None) -> float:
+def height_at(world: World, entity: int, point, target: int | str | None = None) -> float:
     return float(surface_height(world, _water(world, target), _vec(point, "point")[None])[0])
 
 

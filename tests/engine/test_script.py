@@ -244,3 +244,30 @@ def test_a_script_keeping_something_that_is_not_state_is_named_when_hashing(tmp_
     text = str(err.value)
     assert "type generator at entity 1 ('hero') Scripts.slots[0] (ScriptSlot)[3] (KeepsAGenerator).ticks" in text
     assert "__hash_state__" in text
+
+
+def test_commands_name_other_entities_by_id_or_name_and_bad_arguments_say_what_the_command_takes(tmp_path):
+    """Every command that acts on another entity takes its id or its scene name (rigid_body.apply_impulse took
+    only an int: target="crate" was int('crate')); a wrong keyword names the command and its parameters; a
+    single string for the HUD's lines is refused (it showed one letter per line)."""
+    import numpy as np
+
+    from engine.script import ScriptContext
+    from components.water_surface import RigidBodyState
+
+    scene = tmp_path / "s.toml"
+    scene.write_text("[[entities]]\nname = 'me'\n[entities.components.Transform]\n"
+                     "[[entities]]\nname = 'crate'\n[entities.components.Transform]\n"
+                     "[entities.components.RigidBody]\nshape = 'box'\nhalf_extents = [0.5, 0.5, 0.5]\n")
+    app = App(scene, strict=True)
+    ctx = ScriptContext(app.world, 1, "test")
+    crate = ctx.find("crate")
+    ctx.call("rigid_body.apply_impulse", impulse=(0.0, 100.0, 0.0), target="crate")
+    assert app.world.get(crate, RigidBodyState).impulse[1] == 100.0  # applied at the next step
+    with pytest.raises(ValueError, match="target: no entity named 'crat'; did you mean 'crate'"):
+        ctx.call("rigid_body.apply_impulse", impulse=(0.0, 1.0, 0.0), target="crat")
+    with pytest.raises(TypeError, match=r"command 'rigid_body.apply_impulse': .*'speed'.*; it takes \(impulse"):
+        ctx.call("rigid_body.apply_impulse", impulse=(0.0, 1.0, 0.0), speed=3)
+    with pytest.raises(ValueError, match="lists of strings"):
+        ctx.call("render.hud", lines="hello")
+    assert app.world.get(crate, RigidBodyState).impulse[1] == 100.0  # the refused calls changed nothing
