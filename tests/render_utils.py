@@ -2,7 +2,7 @@
 
 ``render_app(app, width, height, frames)`` renders an App headless and returns a PIL image;
 ``assert_golden(image, name)`` compares it with ``tests/golden/<name>.png`` using a tolerance on the
-mean and the maximum channel difference.  On failure it writes ``<name>.actual.png`` and
+mean channel difference and the share of pixels that differ.  On failure it writes ``<name>.actual.png`` and
 ``<name>.diff.png`` next to the reference.  Run pytest with ``--regen-golden`` (or set
 ``REGEN_GOLDEN=1``) to write the references on purpose.  Render tests never skip: with no context
 they fail with a message naming the system packages to install.
@@ -61,8 +61,17 @@ def image_difference(a, b) -> tuple[float, int, np.ndarray]:
     return float(diff.mean()), int(diff.max()), diff.max(axis=2).astype(np.uint8)
 
 
-def assert_golden(image, name: str, mean_tol: float = 2.0, max_tol: int = 80) -> None:
-    """Compare ``image`` with ``tests/golden/<name>.png`` (mean and max channel difference, 0..255)."""
+GOLDEN_MEAN_TOL = 0.5  # mean absolute channel difference, 0..255
+GOLDEN_PIXEL_DIFF = 24  # a pixel "differs" when a channel is off by more than this
+GOLDEN_PIXEL_TOL = 0.002  # the fraction of pixels that may differ
+
+
+def assert_golden(image, name: str, mean_tol: float = GOLDEN_MEAN_TOL, pixel_tol: float = GOLDEN_PIXEL_TOL) -> None:
+    """Compare ``image`` with ``tests/golden/<name>.png``: the mean channel difference at most ``mean_tol`` and at
+    most ``pixel_tol`` of the pixels off by more than GOLDEN_PIXEL_DIFF.  The renders are bit-exact run to run on
+    one machine; the tolerance absorbs another CPU's llvmpipe code paths (a few edge pixels, rounding), not a
+    visible change: a white beam core turned blue or a sun glint removed moved the mean by about 1, which the
+    old rule (mean 2, max 80) let through."""
     from PIL import Image
 
     ref_path = GOLDEN_DIR / f"{name}.png"
@@ -78,8 +87,10 @@ def assert_golden(image, name: str, mean_tol: float = 2.0, max_tol: int = 80) ->
         image.save(GOLDEN_DIR / f"{name}.actual.png")
         pytest.fail(f"{name}: size {image.size} differs from the reference {ref.size}", pytrace=False)
     mean, peak, diff = image_difference(image, ref)
-    if mean > mean_tol or peak > max_tol:
+    off = float((diff > GOLDEN_PIXEL_DIFF).mean())
+    if mean > mean_tol or off > pixel_tol:
         image.save(GOLDEN_DIR / f"{name}.actual.png")
         Image.fromarray(np.clip(diff.astype(np.int32) * 4, 0, 255).astype(np.uint8)).save(GOLDEN_DIR / f"{name}.diff.png")
-        pytest.fail(f"{name}: image differs from {ref_path} (mean {mean:.2f} > {mean_tol} or max {peak} > {max_tol}); "
+        pytest.fail(f"{name}: image differs from {ref_path} (mean {mean:.2f}, limit {mean_tol}; {off:.2%} of pixels off "
+                    f"by more than {GOLDEN_PIXEL_DIFF}, limit {pixel_tol:.2%}; max {peak}); "
                     f"see {name}.actual.png and {name}.diff.png next to it", pytrace=False)

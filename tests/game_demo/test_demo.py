@@ -60,7 +60,7 @@ def _played(ticks: int) -> App:
 def test_main_view_with_minimap_matches_reference():
     app = _played(60)
     image = render_app(app, 256, 144, frames=1)
-    assert_golden(image, "demo_main", mean_tol=3.0)
+    assert_golden(image, "demo_main")
 
 
 def test_top_view_matches_reference():
@@ -71,7 +71,7 @@ def test_top_view_matches_reference():
     top = world.get(find_named_world(world, "top_camera"), Camera)
     top.config = top.config.model_copy(update={"viewport": (0.0, 0.0, 1.0, 1.0)})
     image = render_app(app, 160, 160, frames=1)
-    assert_golden(image, "demo_top", mean_tol=3.0)
+    assert_golden(image, "demo_top")
 
 
 def test_dragging_the_dust_devil_with_injected_mouse_events_moves_it():
