@@ -39,6 +39,15 @@ def test_hash_sees_a_one_bit_change():
     entity, (t,) = app.world.query(Transform)[1]
     t.position[0] = np.nextafter(t.position[0], np.inf)
     assert app.state_hash() != before
+    # the random streams and the state resources are state too: a draw nobody used yet, and the pause flag
+    before = app.state_hash()
+    app.world.random.stream("test.extra", entity).random()
+    assert app.state_hash() != before
+    from engine.app import TimeControl
+
+    before = app.state_hash()
+    app.world.resource(TimeControl).paused = True
+    assert app.state_hash() != before
 
 
 def test_random_streams_independent_of_other_entities():
