@@ -4,6 +4,7 @@ what was expected; and every numeric config field bounded (so no file can size m
 from __future__ import annotations
 
 import math
+import re
 
 import pytest
 from pydantic import ValidationError
@@ -91,7 +92,8 @@ def test_out_of_range_value_names_file_key_value_and_expectation(tmp_path, compo
     assert problem.file == str(path)
     assert problem.key == (f"{table}.{key}" if key else table)
     assert problem.line is not None and problem.line >= 3
-    assert expected in problem.message, problem.message
+    # a bound must be the bound: "less than or equal to 64" must not pass as the start of "... to 640"
+    assert re.search(re.escape(expected) + r"(?![\d.]*\d)", problem.message), problem.message
     if key:
         assert same(problem.value, value)
 

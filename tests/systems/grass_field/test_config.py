@@ -52,6 +52,10 @@ def _problems(tmp_path, registry, body: str):
     ("plants_per_cell = 0", "GrassField.plants_per_cell", "greater than or equal to 1"),
     ("cell_size = 1e9", "GrassField.cell_size", "less than or equal"),
     ("level_thresholds = [0.75, 1.0, 1.5, 4.0]", "GrassField.level_thresholds", "strictly decreasing"),
+    ("level_thresholds = [4.0, 1.5, 1.0, 0.0]", "GrassField.level_thresholds", "positive"),
+    ("level_thresholds = [4.0, 1.5, 1.0, 1.0]", "GrassField.level_thresholds", "strictly decreasing"),
+    ("level_thresholds = [4.0, 1.5, 1.0, 2.0]", "GrassField.level_thresholds", "strictly decreasing"),
+    ("level_thresholds = [4.0, 4.0, 1.0, 0.5]", "GrassField.level_thresholds", "strictly decreasing"),
     ("leaf_subdivisions = [4.0, 2.0, 1.0]", "GrassField.leaf_subdivisions", "at least 4"),
     ("max_level = 6", "GrassField.max_level", "less than or equal to 5"),
 ])
