@@ -44,3 +44,36 @@ def test_restart_rebuilds_the_scene_with_the_same_seed():
     assert app.world.tick == 0
     app.step(10)
     assert app.state_hash() == fresh.state_hash()
+
+
+def test_a_tick_runs_the_stages_in_order_and_applies_each_systems_commands_before_the_next(tmp_path):
+    """Input, then scripts, then simulation, then post-simulation, every tick; a system's deferred commands are
+    applied before the next system of the same stage runs, so that system sees the spawned entity."""
+    from dataclasses import dataclass
+
+    from engine.registry import default_registry
+    from engine.schedule import Stage
+
+    @dataclass
+    class Marker:
+        tick: int
+
+    order, seen = [], []
+    reg = default_registry()
+    for stage in (Stage.POST_SIMULATION, Stage.SIMULATION, Stage.SCRIPT, Stage.INPUT):  # registered backwards
+        reg.add_system(lambda world, dt, s=stage: order.append(s), stage, name=f"test.order.{stage.value}")
+
+    def spawner(world, dt):
+        world.commands.spawn(Marker(world.tick))
+
+    def reader(world, dt):
+        seen.append(sorted(m.tick for _, (m,) in world.query(Marker)))
+
+    reg.add_system(spawner, Stage.SIMULATION, name="test.spawner")
+    reg.add_system(reader, Stage.SIMULATION, name="test.reader", after=("test.spawner",))
+    scene = tmp_path / "s.toml"
+    scene.write_text("[[entities]]\nname = 'a'\n[entities.components.Transform]\n")
+    app = App(scene, registry=reg, strict=True)
+    app.step(2)
+    assert order == [Stage.INPUT, Stage.SCRIPT, Stage.SIMULATION, Stage.POST_SIMULATION] * 2
+    assert seen == [[0], [0, 1]]  # this tick's spawn is already there for the next system

@@ -146,6 +146,43 @@ def test_each_repeat_counts_once_per_pixel_as_the_reference(tmp_path, gl_ctx, pa
     assert (counts != ref).sum() <= 0.03 * covered.sum()
 
 
+def test_the_slab_paths_final_picture_is_the_scatter_paths(tmp_path, gl_ctx):
+    """The GL 3.3 slab path's resolve composites like the scatter path's: the same frame through both gives the
+    same picture (the counts test above reads the slab's accumulation before its resolve, so a broken resolve
+    went unseen), and the dust is in it (the picture differs from the frame without the dust devil)."""
+    import numpy as np
+
+    path = tmp_path / "slab.toml"
+    path.write_text(scene_text(amplitude=4.0, position=(0.0, -2.0, 0.0), particle_count=400, prewarm_time=2.0,
+                               repeats=8, drag_repeats=1, show_markers=False, point_size=2.0,
+                               sub_particle_radius=0.8, grid_resolution=[16, 16, 16])
+                    + camera(target_y=4.0, distance=18.0, pitch=-10.0), encoding="utf-8")
+    pictures = {}
+    for name in ("compute", "slab", "hidden"):
+        app = App(path, strict=True, configs_root=ROOT / "configs")
+        app.step(1)
+        renderer = make_renderer(app, WIDTH, HEIGHT)
+        try:
+            feature = next(f for f in renderer.features if f.name == "dust_devil")
+            feature.use_scatter(8)
+            feature.scatter = feature.compute = name == "compute"
+            if name == "hidden":
+                from components.dust_devil import DustDevilState
+
+                for entity, _ in app.world.query(DustDevilState):
+                    app.world.commands.despawn(entity)
+                app.world.commands.apply()
+            app.render_frame()
+            pictures[name] = np.asarray(renderer.read_image().convert("RGB"), np.int16)
+        finally:
+            renderer.release()
+            app.renderer = None
+    dust = np.abs(pictures["compute"] - pictures["hidden"]).max(axis=2) > 24
+    assert dust.sum() > 200
+    diff = np.abs(pictures["slab"] - pictures["compute"]).max(axis=2)
+    assert (diff > 24).sum() <= 0.03 * dust.sum() and diff.mean() < 1.0
+
+
 @pytest.mark.parametrize("pbvr_path, repeats", [("compute", 8), ("compute", 40), ("vertex", 8)])
 def test_coverage_is_cleared_between_frames(tmp_path, gl_ctx, pbvr_path, repeats):
     """The third frame's counts are its own ensemble's: the coverage words are zeroed inside the cloud's
