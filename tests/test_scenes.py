@@ -14,10 +14,20 @@ SCENES = sorted((ROOT / "configs" / "scenes").glob("*.toml")) + sorted((ROOT / "
 
 @pytest.mark.parametrize("scene", SCENES, ids=lambda p: f"{p.parent.name}/{p.stem}")
 def test_scene_runs_and_renders(scene):
+    from engine.render.components import Camera
+
     app = App(scene, strict=True)
-    image = np.asarray(render_app(app, 64, 40, frames=2, steps_per_frame=2))
+    image = np.asarray(render_app(app, 64, 40, frames=2, steps_per_frame=2), np.int16)
     assert image.std() > 1.0  # a picture, not a flat clear colour
     assert app.world.tick == 4
+    # its entities draw something: the same frame without them (cameras kept) is a different picture
+    bare = App(scene, strict=True)
+    bare.step(4)
+    for entity in [e for e in bare.world.entities if bare.world.try_get(e, Camera) is None]:
+        bare.world.commands.despawn(entity)
+    bare.world.commands.apply()
+    empty = np.asarray(render_app(bare, 64, 40, frames=1, steps_per_frame=0), np.int16)
+    assert (np.abs(image - empty).max(axis=2) > 24).mean() > 0.02
 
 
 def test_gallery_command_renders_a_preset(tmp_path):

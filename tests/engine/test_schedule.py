@@ -51,6 +51,7 @@ def test_stages_in_fixed_order_and_duplicate_names():
 def test_fixed_clock_accumulates_and_caps_catch_up():
     clock = FixedClock(dt=0.01, max_steps=3)
     assert clock.advance(0.025) == 2
+    assert clock.alpha == pytest.approx(0.5)  # half a step left over: how far the frame is into the next tick
     assert clock.advance(0.004) == 0
     assert clock.advance(0.001) == 1  # 0.005 + 0.004 + 0.001 reaches one step
     assert clock.advance(1.0) == 3  # a long stall runs at most 3 steps
