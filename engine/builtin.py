@@ -32,21 +32,24 @@ class Name:
     value: str
 
 
+def find_named(world: World, name: str) -> int | None:
+    """The lowest-id live entity the scene (or a prefab) named ``name``; None when there is none."""
+    for entity, (n,) in world.query(Name):
+        if n.value == name:
+            return entity
+    return None
+
+
 def entity_ref(world: World, ref, param: str = "entity") -> int:
     """The entity a command argument names: an id, or the ``name`` the scene (or a prefab) gave it (the lowest
     id of that name).  A name nobody has raises ValueError with the nearest name; ``param``: the argument's name
     for the message."""
     if isinstance(ref, str):
-        from engine.config import suggest
-
-        found = None
-        names = []
-        for e, (name,) in world.query(Name):
-            names.append(name.value)
-            if name.value == ref and found is None:
-                found = e
+        found = find_named(world, ref)
         if found is None:
-            close = suggest(ref, names)
+            from engine.config import suggest
+
+            close = suggest(ref, [n.value for _, (n,) in world.query(Name)])
             raise ValueError(f"{param}: no entity named '{ref}'" + (f"; did you mean '{close}'?" if close else ""))
         return found
     if isinstance(ref, (bool, float)) or not isinstance(ref, (int, np.integer)):

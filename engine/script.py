@@ -71,12 +71,9 @@ class ScriptContext:
 
     def find(self, name: str) -> Entity | None:
         """The lowest-id live entity the scene (or a prefab) named ``name``; None when there is none."""
-        from engine.builtin import Name
+        from engine.builtin import find_named
 
-        for entity, (n,) in self.world.query(Name):
-            if n.value == name:
-                return entity
-        return None
+        return find_named(self.world, name)
 
     def ground_height(self, x: float, z: float) -> float | None:
         """World height of the scene's terrain under world (x, z); None without a terrain."""

@@ -19,12 +19,13 @@ import numpy as np
 
 from components.energy_wave import EnergyWaveEmitter
 from engine.app import App
+from engine.builtin import find_named
 from engine.exact import matmul, matvec
 from engine.input import InputEvent, InputQueue
 from engine.render.components import Camera, camera_matrices, window_size
 from engine.script import Scripts
 from engine.spatial import Transform
-from game_demo.scripts.common import GameState, Target, find_named_world
+from game_demo.scripts.common import GameState, Target
 from game_demo.scripts.chaser import DustDevilChaser
 from game_demo.scripts.player import Player
 from game_demo.scripts.rules import GameRules
@@ -33,7 +34,7 @@ from game_demo.scripts.rules import GameRules
 def script_params(world, entity_name: str, script_cls):
     """The parameters of ``script_cls`` on the entity named ``entity_name`` as the scene configured them (the
     script's defaults when the entity or the script is missing)."""
-    entity = find_named_world(world, entity_name)
+    entity = find_named(world, entity_name)
     scripts = None if entity is None else world.try_get(entity, Scripts)
     for slot in (scripts.slots if scripts is not None else []):
         if slot.name == script_cls.script_name:
@@ -50,7 +51,7 @@ def player_params(world) -> Player.Params:
 def fire_range(world, share: float = 0.85) -> float:
     """Metres within which the pilot fires: ``share`` of the player's beam range (its EnergyWaveEmitter's
     ``beam_range``, as the scene or its preset sets it), so that a retuned beam keeps the pilot in reach."""
-    player = find_named_world(world, "player")
+    player = find_named(world, "player")
     emitter = None if player is None else world.try_get(player, EnergyWaveEmitter)
     return share * (emitter.beam_range if emitter is not None else EnergyWaveEmitter.model_fields["beam_range"].default)
 
@@ -108,7 +109,7 @@ class AutoPilot:
     def events(self, world) -> list[InputEvent]:
         out: list[InputEvent] = []
         state = world.try_resource(GameState)
-        player = find_named_world(world, "player")
+        player = find_named(world, "player")
         if state is None or player is None or state.phase != "playing":
             for key in sorted(self.holding):
                 self._release(key, out)
@@ -117,7 +118,7 @@ class AutoPilot:
             out.extend(self.drag_plan.pop(0))
             return out
         p = world.get(player, Transform)
-        devil = find_named_world(world, "dust_devil")
+        devil = find_named(world, "dust_devil")
         if devil is not None:
             d = world.get(devil, Transform).position
             danger = self.danger_radius if self.danger_radius is not None else danger_radius(world)
@@ -165,7 +166,7 @@ class AutoPilot:
 
     def _plan_drag(self, world, player_pos, devil_pos, out: list[InputEvent]) -> bool:
         """Press on the dust devil in the top view, move it away from the player, release."""
-        top = find_named_world(world, "top_camera")
+        top = find_named(world, "top_camera")
         if top is None:
             return False
         away = np.array([devil_pos[0] - player_pos[0], 0.0, devil_pos[2] - player_pos[2]])

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from engine.builtin import Name, Terrain
+from engine.builtin import Terrain
 
 PATTERNS = "ABCDEFGH"
 
@@ -62,10 +62,3 @@ def terrain_extent(ctx, without_terrain: float) -> float:
         return float(min(terrain.field.size)) / 2.0
     return without_terrain
 
-
-def find_named_world(world, name: str) -> int | None:
-    """The lowest-id entity named ``name`` (for code outside scripts, such as the autoplay)."""
-    for entity, (n,) in world.query(Name):
-        if n.value == name:
-            return entity
-    return None

@@ -9,13 +9,14 @@ import numpy as np
 import pytest
 
 from engine.app import App
+from engine.builtin import find_named
 from engine.cli import validate_file
 from engine.input import InputEvent, InputQueue
 from engine.registry import default_registry
 from engine.render.components import Camera
 from engine.spatial import Transform
 from game_demo.autoplay import AutoPilot
-from game_demo.scripts.common import GameState, find_named_world
+from game_demo.scripts.common import GameState
 from tests.render_utils import assert_golden, render_app
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -66,9 +67,9 @@ def test_main_view_with_minimap_matches_reference():
 def test_top_view_matches_reference():
     app = _played(60)
     world = app.world
-    main = world.get(find_named_world(world, "main_camera"), Camera)
+    main = world.get(find_named(world, "main_camera"), Camera)
     main.config = main.config.model_copy(update={"enabled": False})
-    top = world.get(find_named_world(world, "top_camera"), Camera)
+    top = world.get(find_named(world, "top_camera"), Camera)
     top.config = top.config.model_copy(update={"viewport": (0.0, 0.0, 1.0, 1.0)})
     image = render_app(app, 160, 160, frames=1)
     assert_golden(image, "demo_top")
@@ -90,7 +91,7 @@ def test_pause_stops_the_timer_and_the_dust_devil():
     app = App(SCENE)
     app.step(10)
     world = app.world
-    devil = find_named_world(world, "dust_devil")
+    devil = find_named(world, "dust_devil")
     queue = world.resource(InputQueue)
     queue.push(InputEvent("key_down", "escape"))
     queue.push(InputEvent("key_up", "escape"))
@@ -107,10 +108,10 @@ def _drag_devil(app: App, offset=(-12.0, 8.0)) -> np.ndarray:
     """Drag the dust devil in the top view by ``offset`` metres (x, z) with injected mouse events; returns how far
     it moved."""
     world = app.world
-    devil = find_named_world(world, "dust_devil")
+    devil = find_named(world, "dust_devil")
     start = world.get(devil, Transform).position.copy()
     pilot = AutoPilot(window=(app.config.render.width, app.config.render.height))
-    top = find_named_world(world, "top_camera")
+    top = find_named(world, "top_camera")
     p0 = pilot._to_pixels(world, top, start)
     p1 = pilot._to_pixels(world, top, start + np.array([offset[0], 0.0, offset[1]]))
     queue = world.resource(InputQueue)
@@ -153,7 +154,7 @@ def test_restart_keeps_the_window_input_queue_and_the_keys_held():
     app.step(1)  # restarts at the end of this tick
     queue.push(InputEvent("key_up", "r"))
     assert app.world.resource(InputQueue) is queue
-    player = find_named_world(app.world, "player")
+    player = find_named(app.world, "player")
     before = app.world.get(player, Transform).position.copy()
     app.step(30)
     moved = app.world.get(player, Transform).position - before
@@ -191,7 +192,7 @@ def test_the_hud_pattern_is_the_beam_pattern_from_the_start():
     app = App(SCENE)
     app.step(2)
     state = app.world.resource(GameState)
-    emitter = app.world.get(find_named_world(app.world, "player"), EnergyWaveEmitter)
+    emitter = app.world.get(find_named(app.world, "player"), EnergyWaveEmitter)
     for key, value in PATTERN_PARAMETERS[state.pattern].items():
         assert getattr(emitter, key) == value  # the preset's A/E mix before, with the HUD saying "A"
 
@@ -205,5 +206,5 @@ def test_the_autoplay_reach_follows_the_scene_tuning():
     world = app.world
     assert fire_range(world) == pytest.approx(0.85 * 40.0)
     assert danger_radius(world) == pytest.approx(3.0 + 3.0 * 2.5)  # lose_radius + chaser speed x 2.5 s
-    configure(world, find_named_world(world, "player"), beam_range=22.0)
+    configure(world, find_named(world, "player"), beam_range=22.0)
     assert fire_range(world) == pytest.approx(0.85 * 22.0)
