@@ -127,10 +127,14 @@ def budget_problems(world: World, plan: EntityPlan, file: str) -> list[Problem]:
             continue
         others = [c for entity, (c,) in world.query(type(cfg)) if entity not in despawns]
         others += [c for entity, comps in spawns if entity not in despawns for c in comps if type(c) is type(cfg)]
+        costs: dict[str, float] = {}
+        for other in others:
+            for what, cost, _ in other.scene_budgets(fixed_dt):
+                costs[what] = costs.get(what, 0) + cost
         for what, cost, limit in budgets(fixed_dt):
             if not cost:
                 continue
-            used = sum(c2 for c in others for w2, c2, _ in c.scene_budgets(fixed_dt) if w2 == what)
+            used = costs.get(what, 0)
             if used + cost > limit:
                 found.append(Problem(file, f"components.{cname}",
                                      f"not spawned: with the {len(others)} {cname} entities alive or queued the "

@@ -110,8 +110,6 @@ class StateHashError(TypeError):
                 "out with __hash_state__; a dataclass field with metadata={'hash': False})")
 
 
-
-
 def digest(obj: Any) -> str:
     """Hex BLAKE2b digest of any hashable-state object."""
     h = hashlib.blake2b(digest_size=16)
