@@ -397,25 +397,28 @@ class FieldGpu:
         return len(cells)
 
     # ------------------------------------------------------------------------------------ level 5 (band)
-    def _band_key(self, cell: int, camera: CameraInput, viewer=None) -> tuple[int, int, float]:
-        """(cell, eye height above the cell in steps of half a plant height, the view's band apothem).  The step in use is kept until the
-        eye is three quarters of a step away from it (hysteresis: an eye hovering at a step boundary, as a
-        camera following a walker does, would otherwise re-bake the band at every crossing); per ``viewer``."""
+    def _band_key(self, cell: int, camera: CameraInput, viewer=None,
+                  apothem: float | None = None) -> tuple[int, int, float]:
+        """(cell, eye height above the cell in steps of half a plant height, the band's apothem: the plan's, or
+        :func:`~systems.grass_field.frame.band_apothem` of ``camera``).  The step in use is kept until the eye is
+        three quarters of a step away from it (hysteresis: an eye hovering at a step boundary, as a camera
+        following a walker does, would otherwise re-bake the band at every crossing); per ``viewer``."""
         ground = float(self.data.placed.cell_centre[cell, 1])
         step = max(0.5 * self.data.plant_height, 1e-6)
         level = (float(camera.position[1]) - ground) / step
         last = self._band_levels.get(viewer)
         if last is None or abs(level - last) > 0.75:
             last = self._band_levels[viewer] = int(np.floor(level + 0.5))
-        return cell, last, band_apothem(self.cfg, self.data, camera)
+        return cell, last, band_apothem(self.cfg, self.data, camera) if apothem is None else apothem
 
-    def ensure_band(self, cell: int, camera: CameraInput, prefetch: int = 1, viewer=None) -> _BandEntry:
+    def ensure_band(self, cell: int, camera: CameraInput, prefetch: int = 1, viewer=None,
+                    apothem: float | None = None) -> _BandEntry:
         """The band images of ``cell`` (baked now if missing), and up to ``prefetch`` neighbours baked ahead:
         those the viewer is heading for (ahead of its motion since the last frame, nearest the heading first),
         so a walk bakes about one cell per cell crossed instead of every neighbour it passes; none while it
         stands still.  ``viewer``: whose motion and height step these are (a view's name)."""
         self._band_resolution(camera)
-        key = self._band_key(cell, camera, viewer)
+        key = self._band_key(cell, camera, viewer, apothem)
         entry = self.band_entries.get(key)
         if entry is None:
             entry = self._bake_band(key, camera)
@@ -580,7 +583,7 @@ class FieldGpu:
         if len(plan.impostor_cells) or plan.band_cell is not None:
             self.ensure_impostors()
         if plan.band_cell is not None:
-            self.ensure_band(plan.band_cell, camera, viewer=viewer)
+            self.ensure_band(plan.band_cell, camera, viewer=viewer, apothem=plan.band_apothem)
 
     def draw(self, fbo: moderngl.Framebuffer, plan: FramePlan, view: View, camera: CameraInput,
              debug: bool, viewer=None) -> None:
@@ -597,7 +600,7 @@ class FieldGpu:
                                               plan.impostor_blend, 4)
         band_vertices = 0
         if plan.band_cell is not None and plan.band_sides.any():
-            entry = self.band_entries[self._band_key(plan.band_cell, camera, viewer)]
+            entry = self.band_entries[self._band_key(plan.band_cell, camera, viewer, plan.band_apothem)]
             band_vertices = self._band_quads(entry, plan.band_sides & entry.content)
         # levels 0-3: one plant list (each level's plants nearest first, for early depth rejection), one draw
         # per level and primitive type
