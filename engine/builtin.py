@@ -5,7 +5,7 @@ input and script systems.  Rendering components (Camera, Mesh) are registered by
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field as dataclass_field
 from pathlib import Path
 from typing import Literal
 
@@ -22,6 +22,7 @@ from engine.registry import BuildContext, Registry
 from engine.schedule import Stage
 from engine.script import destroy_scripts, run_scripts
 from engine.spatial import Transform, quat_from_euler
+from engine.textures import load_texture
 from engine.world import World
 
 
@@ -115,6 +116,13 @@ class TerrainConfig(ConfigModel):
     flatten: float = Field(0.0, ge=0.0, le=1.0, description="Blend towards the mean height (1 = flat).")
     colors: list[Vec3] = Field([(0.07, 0.15, 0.04), (0.13, 0.22, 0.06), (0.28, 0.24, 0.16), (0.75, 0.75, 0.75)],
                                min_length=2, max_length=8, description="Colour ramp from low to high.")
+    texture: str | None = Field(None, description="Ground texture: an 8-bit image (PNG, JPEG) inside the configs root, "
+                                "tiled over the terrain; the ground's colour is the ramp's colour times the "
+                                "texture's (sRGB decoded), e.g. the sand of seeds/004 section 3.1.")
+    texture_size: float = Field(4.0, gt=0.0, le=10000.0, description="Metres covered by one repeat of the texture.")
+    texture_strength: float = Field(1.0, ge=0.0, le=1.0,
+                                    description="How much of the texture shows: 0 = the colour ramp alone, 1 = ramp "
+                                                "times texture.")
     centered: bool = Field(True, description="Centre the terrain on the entity's position.")
     lod_pixels: float = Field(2.0, ge=0.0, le=64.0,
                               description="Level of detail: each chunk is drawn with the coarsest grid whose height "
@@ -130,14 +138,9 @@ class TerrainConfig(ConfigModel):
         at spawn."""
         if value is None:
             return value
-        from engine.config import resolve_inside
-
-        root = (info.context or {}).get("configs_root")
-        if root is None:  # validated alone: only what the text itself shows
-            if value.startswith(("/", "\\")) or ":" in value or ".." in Path(value).parts:
-                raise ValueError(f"path '{value}' must be relative to the configs root and stay inside it")
+        path = _asset_path(value, info)
+        if path is None:
             return value
-        path = resolve_inside(root, value)  # ValueError names the escape
         try:
             load_heightmap_png(path)  # decoded, as the spawn will: a truncated file fails here, not at spawn
         except FileNotFoundError:
@@ -146,6 +149,35 @@ class TerrainConfig(ConfigModel):
             raise ValueError(f"height map '{path}' must be a .png file")
         return value
 
+    @field_validator("texture")
+    @classmethod
+    def _texture_file(cls, value: str | None, info: ValidationInfo) -> str | None:
+        """The image must lie inside the configs root (or the engine's stock configs) and decode, checked when the
+        file is validated, as the height map is."""
+        if value is None:
+            return value
+        path = _asset_path(value, info)
+        if path is None:
+            return value
+        try:
+            load_texture(path)
+        except FileNotFoundError:
+            raise ValueError(f"texture not found: {path}") from None
+        return value
+
+
+def _asset_path(value: str, info: ValidationInfo) -> Path | None:
+    """The file an asset field names (:func:`engine.config.resolve_asset`); None when validated without a
+    configs root (then only the text is checked: relative, not escaping)."""
+    from engine.config import resolve_asset
+
+    root = (info.context or {}).get("configs_root")
+    if root is None:  # validated alone: only what the text itself shows
+        if value.startswith(("/", "\\")) or ":" in value or ".." in Path(value).parts:
+            raise ValueError(f"path '{value}' must be relative to the configs root and stay inside it")
+        return None
+    return resolve_asset(root, value)  # ValueError names the escape
+
 
 @dataclass
 class Terrain:
@@ -153,13 +185,14 @@ class Terrain:
 
     config: TerrainConfig
     field: HeightField
+    texture: np.ndarray | None = dataclass_field(default=None, metadata={"hash": False})  # linear RGB (rows, cols, 3)
 
 
 def _build_terrain(cfg: TerrainConfig, ctx: BuildContext) -> list:
-    if cfg.heightmap:
-        from engine.config import resolve_inside
+    from engine.config import resolve_asset
 
-        heights = load_heightmap_png(resolve_inside(ctx.configs_root, cfg.heightmap), cfg.height_scale)
+    if cfg.heightmap:
+        heights = load_heightmap_png(resolve_asset(ctx.configs_root, cfg.heightmap), cfg.height_scale)
     else:
         heights = midpoint_displacement(cfg.size_exponent, cfg.roughness, cfg.amplitude, ctx.rng("terrain"))
     if cfg.flatten:
@@ -169,7 +202,8 @@ def _build_terrain(cfg: TerrainConfig, ctx: BuildContext) -> list:
     if cfg.centered:
         origin = -0.5 * np.array([(cols - 1) * cfg.spacing, (rows - 1) * cfg.spacing])
     field = HeightField(heights, cfg.spacing, origin)
-    return [Terrain(cfg, field), Collider(shape="heightfield", heightfield=field)]
+    texture = load_texture(resolve_asset(ctx.configs_root, cfg.texture)) if cfg.texture else None
+    return [Terrain(cfg, field, texture), Collider(shape="heightfield", heightfield=field)]
 
 
 def ground_height(world: World, x: float, z: float) -> float | None:

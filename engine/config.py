@@ -253,6 +253,22 @@ def resolve_inside(root: Path, relative: str, suffix: str = "") -> Path:
     return candidate
 
 
+STOCK_CONFIGS = Path(__file__).resolve().parents[1] / "configs"  # the engine's own configs (stock presets, assets)
+
+
+def resolve_asset(root: Path, relative: str) -> Path:
+    """An asset file (height map, texture) named relative to the configs root: the game's own when it has the
+    file, else the engine's stock one of the same name (so a stock preset that names a stock asset works in a game
+    kept in its own folder, as the presets do); the game's path when neither exists, for the error message.
+    Refuses absolute paths and escapes as :func:`resolve_inside` does."""
+    path = resolve_inside(root, relative)
+    if not path.is_file() and Path(root).resolve() != STOCK_CONFIGS.resolve():
+        stock = resolve_inside(STOCK_CONFIGS, relative)
+        if stock.is_file():
+            return stock
+    return path
+
+
 def deep_merge(base: dict, override: dict) -> dict:
     """``override`` on top of ``base``; nested tables merge, everything else replaces."""
     out = dict(base)

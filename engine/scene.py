@@ -27,7 +27,7 @@ from typing import Any
 from pydantic import Field
 
 from engine.config import (ConfigError, ConfigModel, Problem, Vec3, deep_merge, locate_line, model_problems,
-                           format_key, read_toml, resolve_inside, suggest)
+                           STOCK_CONFIGS, format_key, read_toml, resolve_inside, suggest)
 from engine.registry import BuildContext, Registry, RegistryError
 from engine.script import Scripts, make_slot
 from engine.world import World
@@ -110,7 +110,6 @@ class ScenePlan:
 
 # The engine's own presets (configs/effects/ beside the engine package): a scene's preset name that its own
 # configs root does not hold resolves here, so a game kept in its own folder can use the stock presets.
-STOCK_CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 
 
 def find_configs_root(path: Path) -> Path:

@@ -186,10 +186,13 @@ class _TerrainMesh:
     shade: moderngl.Texture  # rgba8, one texel per grid point: sqrt(baked diffuse + ambient light × albedo / scale)
     shade_key: tuple = ()  # the light, colours and model rotation it was baked with
     shade_scale: float = 1.0
+    detail: moderngl.Texture | None = None  # the ground texture (rgba8, sqrt of mix(1, colour, strength)), tiled
+    detail_key: tuple = ()  # the texture array and strength it was made from
 
     def release(self) -> None:
-        for obj in (self.vao, self.vao_vertex, self.vbo, self.ibo, self.shade):
-            obj.release()
+        for obj in (self.vao, self.vao_vertex, self.vbo, self.ibo, self.shade, self.detail):
+            if obj is not None:
+                obj.release()
 
 
 class TerrainFeature(RenderFeature):
@@ -211,15 +214,17 @@ class TerrainFeature(RenderFeature):
     def extract(self, world) -> list:
         out = []
         for entity, (terrain, t) in world.query(Terrain, Transform):
-            key = (id(terrain.field.heights), terrain.field.heights.shape, terrain.field.spacing)
+            key = (id(terrain.field.heights), terrain.field.heights.shape, terrain.field.spacing,
+                   terrain.texture is not None)
             out.append((entity, key, terrain, t.matrix().astype(np.float32)))
         return out
 
     def static_key(self, view: View, data) -> Any:
-        """The terrains drawn (height field, model matrix, colours, level-of-detail bound): the level selection
-        and the baked light follow from them, the view and the light."""
+        """The terrains drawn (height field, model matrix, colours, level-of-detail bound, ground texture): the
+        level selection and the baked light follow from them, the view and the light."""
         return (self.vertex_shade,) + tuple(
-            (entity, key, model.tobytes(), terrain.config.lod_pixels, tuple(map(tuple, terrain.config.colors)))
+            (entity, key, model.tobytes(), terrain.config.lod_pixels, tuple(map(tuple, terrain.config.colors)),
+             _detail_key(terrain))
             for entity, key, terrain, model in data)
 
     def _mesh(self, entity: int, key: tuple, terrain: Terrain) -> _TerrainMesh:
@@ -230,7 +235,8 @@ class TerrainFeature(RenderFeature):
             mesh.release()
         chunks = build_terrain_chunks(terrain.field)
         vbo, ibo = self.ctx.buffer(chunks.vertices.tobytes()), self.ctx.buffer(chunks.indices.tobytes())
-        vao, vao_vertex = (self.ctx.vertex_array(self._program(vertex_shade),
+        textured = terrain.texture is not None
+        vao, vao_vertex = (self.ctx.vertex_array(self._program(vertex_shade, textured),
                                                  [(vbo, "3f 3f 1f", "in_position", "in_normal", "in_skirt")], ibo,
                                                  index_element_size=4) for vertex_shade in (False, True))
         rows, cols = terrain.field.heights.shape
@@ -258,8 +264,30 @@ class TerrainFeature(RenderFeature):
         mesh.shade_key = key
         self.bakes += 1
 
-    def _program(self, vertex_shade: bool = False) -> moderngl.Program:
-        return self.renderer.load_program(SHADERS, "terrain", ("VERTEX_SHADE",) if vertex_shade else ())
+    def _upload_detail(self, mesh: _TerrainMesh, terrain: Terrain) -> None:
+        """(Re-)make the mesh's ground texture when the texture or its strength changed: mix(1, colour, strength)
+        per texel (linear), square-root encoded in 8 bits like the shade texture (the shader squares it), with
+        mipmaps filtered bilinearly within the nearest level (a software rasteriser's cheaper path; trilinear
+        would fetch twice the texels), repeating."""
+        key = _detail_key(terrain)
+        if key == mesh.detail_key:
+            return
+        if mesh.detail is not None:
+            mesh.detail.release()
+        strength = np.float32(terrain.config.texture_strength)
+        colour = np.float32(1.0) + (terrain.texture - np.float32(1.0)) * strength
+        encoded = np.round(np.sqrt(np.clip(colour, 0.0, 1.0)) * 255.0).astype(np.uint8)
+        rows, cols = encoded.shape[:2]
+        rgba = np.concatenate([encoded, np.full((rows, cols, 1), 255, np.uint8)], axis=-1)
+        detail = self.ctx.texture((cols, rows), 4, rgba[::-1].tobytes())  # image row 0 (top) at v = 1
+        detail.repeat_x = detail.repeat_y = True
+        detail.build_mipmaps()
+        detail.filter = (moderngl.LINEAR_MIPMAP_NEAREST, moderngl.LINEAR)
+        mesh.detail, mesh.detail_key = detail, key
+
+    def _program(self, vertex_shade: bool = False, textured: bool = False) -> moderngl.Program:
+        defines = (("VERTEX_SHADE",) if vertex_shade else ()) + (("TEXTURED",) if textured else ())
+        return self.renderer.load_program(SHADERS, "terrain", defines)
 
     def add_passes(self, graph, view: View, data) -> None:
         if not data:
@@ -275,12 +303,18 @@ class TerrainFeature(RenderFeature):
             for entity, key, terrain, model in data:
                 mesh = self._mesh(entity, key, terrain)
                 self._bake(mesh, terrain, model)
+                textured = terrain.texture is not None
+                detail = {}
+                if textured:
+                    self._upload_detail(mesh, terrain)
+                    mesh.detail.use(1)
+                    detail = dict(detail_map=1, detail_scale=1.0 / terrain.config.texture_size)
                 levels = select_levels(mesh.chunks, model, view.view_proj, view.proj, view.camera_pos,
                                        view.height, view.ortho, terrain.config.lod_pixels)
                 mesh.shade.use(0)
                 for vao, ranges, vertex_shade in self._batches(mesh, levels):
-                    set_uniforms(self._program(vertex_shade), **lighting, model=model.T.copy(), shade_map=0,
-                                 shade_scale=mesh.shade_scale, uv_scale=mesh.chunks.uv_scale,
+                    set_uniforms(self._program(vertex_shade, textured), **lighting, **detail, model=model.T.copy(),
+                                 shade_map=0, shade_scale=mesh.shade_scale, uv_scale=mesh.chunks.uv_scale,
                                  uv_offset=mesh.chunks.uv_offset)
                     for first, count in ranges:
                         vao.render(moderngl.TRIANGLES, vertices=count, first=first)
@@ -304,6 +338,15 @@ class TerrainFeature(RenderFeature):
         for mesh in self._meshes.values():
             mesh.release()
         self._meshes.clear()
+
+
+def _detail_key(terrain: Terrain) -> tuple:
+    """What a terrain's ground texture is made from and how it is tiled: the decoded image (its identity: rebuilt
+    with the component), the strength and the tile size; () without one."""
+    if terrain.texture is None:
+        return ()
+    return (id(terrain.texture), terrain.texture.shape, terrain.config.texture_strength,
+            terrain.config.texture_size)
 
 
 # ------------------------------------------------------------------------- meshes

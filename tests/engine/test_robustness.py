@@ -18,6 +18,7 @@ from PIL import Image
 from pydantic import Field
 
 from engine.app import App
+from engine.builtin import Terrain
 from engine.cli import main
 from engine.config import ConfigError, ConfigModel
 from engine.registry import default_registry
@@ -129,6 +130,39 @@ def test_bad_heightmap_is_caught_by_validate_with_its_key(tmp_path, capsys, heig
     assert code == 1 and expected in text
     good = scene(root, ENTITY + '[entities.components.Terrain]\nheightmap = "assets/hills.png"\n', "good.toml")
     assert cli(capsys, "validate", str(good))[0] == 0
+
+
+@pytest.mark.parametrize("texture, expected", [
+    ("assets/missing.png", "texture not found"),
+    ("assets/notes.png", "not a readable image"),
+    ("assets/cut.png", "not a readable image"),  # the header reads; the pixels do not
+    ("../../outside.png", "escapes the configs root"),
+])
+def test_bad_ground_texture_is_caught_by_validate_with_its_key(tmp_path, capsys, texture, expected):
+    root = configs(tmp_path)
+    path = scene(root, ENTITY + f'[entities.components.Terrain]\ntexture = "{texture}"\n')
+    (p,) = problems_of(path)
+    assert p.key == "entities[0].components.Terrain.texture" and p.value == texture and expected in p.message
+    code, text = cli(capsys, "validate", str(path))
+    assert code == 1 and expected in text
+    good = scene(root, ENTITY + '[entities.components.Terrain]\ntexture = "assets/hills.png"\n', "good.toml")
+    assert cli(capsys, "validate", str(good))[0] == 0
+    app = App(good)  # grey 128 decoded from sRGB: 0.2158 in linear light
+    (terrain,) = [t for _, (t,) in app.world.query(Terrain)]
+    assert terrain.texture.shape == (5, 5, 3) and np.allclose(terrain.texture, 0.21586, atol=1e-5)
+
+
+def test_a_stock_preset_finds_its_stock_texture_from_a_game_folder(tmp_path, capsys):
+    """terrain/dust_devil_desert names assets/sand.png; a game's own configs root without that file uses the
+    engine's, as it uses the engine's preset (and its own file of the same name when it has one)."""
+    root = configs(tmp_path)
+    path = scene(root, ENTITY + '[entities.components.Terrain]\npreset = "terrain/dust_devil_desert"\n')
+    assert cli(capsys, "validate", str(path))[0] == 0
+    (terrain,) = [t for _, (t,) in App(path).world.query(Terrain)]
+    assert terrain.texture.shape == (256, 256, 3)
+    Image.fromarray(np.full((3, 2), 255, np.uint8), "L").save(root / "assets" / "sand.png")
+    (terrain,) = [t for _, (t,) in App(path).world.query(Terrain)]
+    assert terrain.texture.shape == (3, 2, 3) and np.all(terrain.texture == 1.0)
 
 
 def test_heightmap_too_large_is_refused_from_the_header(tmp_path):

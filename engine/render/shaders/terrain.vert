@@ -7,6 +7,9 @@
 // VERTEX_SHADE (chunks drawn at full detail, level 0): every vertex is a grid point, so the baked light is read
 // here, once per vertex, and the whole colour interpolated across the triangle (Gouraud) — no texture fetch
 // per pixel, the larger part of the terrain's cost on a software rasteriser.
+//
+// TEXTURED (a Terrain with a ground texture): the lit albedo is multiplied per pixel by the tiled texture, so
+// the varyings keep it apart from the specular.
 #include "lit.glsl"
 uniform mat4 view_proj;
 uniform mat4 model;
@@ -16,9 +19,18 @@ uniform float shade_scale;  // the shade texture's encoding scale (terrain.frag 
 in vec3 in_position;
 in vec3 in_normal;
 in float in_skirt;  // > 0 on skirt vertices: lowered by this much (hides LOD cracks), keeping the edge's shading
+#ifdef TEXTURED
+uniform float detail_scale;  // 1 / texture_size: local metres -> repeats of the ground texture
+out vec2 v_detail_uv;
+#endif
 #ifdef VERTEX_SHADE
 uniform sampler2D shade_map;    // rgba8: sqrt(light / shade_scale)
+#ifdef TEXTURED
+out vec3 v_lit;             // the lit, fogged albedo (times the ground texture per pixel, terrain.frag)
+out vec3 v_add;             // plus the fogged specular
+#else
 out vec3 v_color;           // the fogged colour of this grid point
+#endif
 #else
 out vec2 v_uv;
 out vec4 v_fogged;   // rgb: mix(specular, sky_horizon, fog); a: shade_scale · (1 - fog)
@@ -36,10 +48,18 @@ void main() {
 #ifdef VERTEX_SHADE
     ivec2 size = textureSize(shade_map, 0);
     vec3 light = texelFetch(shade_map, clamp(ivec2(floor(uv * vec2(size))), ivec2(0), size - 1), 0).rgb;
+#ifdef TEXTURED
+    v_lit = light * light * fogged.a;
+    v_add = fogged.rgb;
+#else
     v_color = light * light * fogged.a + fogged.rgb;
+#endif
 #else
     v_fogged = fogged;
     v_uv = uv;
+#endif
+#ifdef TEXTURED
+    v_detail_uv = in_position.xz * detail_scale;
 #endif
     world.y -= in_skirt;
     gl_Position = view_proj * world;
