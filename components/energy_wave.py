@@ -257,6 +257,8 @@ class EnergyWaveHit:
 _VEC_FIELDS = ("position", "velocity", "hit_point", "acceleration", "target_offset")
 _SCALAR_FIELDS = ("age", "lifetime")
 _CODE_FIELDS = ("pattern", "control")
+_QUAT_FIELDS = ("frame",)
+_FIELDS = (*_VEC_FIELDS, *_QUAT_FIELDS, *_SCALAR_FIELDS, *_CODE_FIELDS)
 
 
 @dataclass
@@ -266,7 +268,8 @@ class ParticleBuffer:
     position, velocity (m, m/s); hit_point P0 = H (eq. 3.5, 3.7); acceleration A (eq. 3.4, circular only);
     target_offset (the random spread added to a control point); age (s since emission, reset at the hit);
     lifetime (s: beam range / speed before the hit, τ after); pattern (BEAM or 0..7 = A..H); control (index of the
-    chosen control point, irregular only).
+    chosen control point, irregular only); frame (the emitter's rotation when the particle left it, a (w, x, y, z)
+    quaternion: the wave's direction, which the control points are relative to, eq. 3.5).
     """
 
     capacity: int
@@ -280,6 +283,7 @@ class ParticleBuffer:
     lifetime: np.ndarray = field(default=None)  # type: ignore[assignment]
     pattern: np.ndarray = field(default=None)  # type: ignore[assignment]
     control: np.ndarray = field(default=None)  # type: ignore[assignment]
+    frame: np.ndarray = field(default=None)  # type: ignore[assignment]
 
     def __post_init__(self) -> None:
         c = int(self.capacity)
@@ -293,14 +297,17 @@ class ParticleBuffer:
             self.pattern = np.full(c, BEAM, dtype=np.int8)
         if self.control is None:
             self.control = np.zeros(c, dtype=np.int8)
+        if self.frame is None:
+            self.frame = np.zeros((c, 4))
+            self.frame[:, 0] = 1.0
 
     def __hash_state__(self) -> dict:
         """Only the live slots are state (dead slots keep stale values)."""
         n = self.count
-        return {"count": n, **{k: getattr(self, k)[:n] for k in (*_VEC_FIELDS, *_SCALAR_FIELDS, *_CODE_FIELDS)}}
+        return {"count": n, **{k: getattr(self, k)[:n] for k in _FIELDS}}
 
     def arrays(self) -> list[np.ndarray]:
-        return [getattr(self, k) for k in (*_VEC_FIELDS, *_SCALAR_FIELDS, *_CODE_FIELDS)]
+        return [getattr(self, k) for k in _FIELDS]
 
     def live(self, name: str) -> np.ndarray:
         """View of the live part of one array."""
@@ -310,7 +317,7 @@ class ParticleBuffer:
         """Reallocate to ``capacity`` slots, keeping the live particles (used when max_particles changes)."""
         capacity = int(capacity)
         keep = min(self.count, capacity)
-        for name in (*_VEC_FIELDS, *_SCALAR_FIELDS, *_CODE_FIELDS):
+        for name in _FIELDS:
             old = getattr(self, name)
             new = np.zeros((capacity,) + old.shape[1:], dtype=old.dtype)
             new[:keep] = old[:keep]

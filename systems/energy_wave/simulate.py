@@ -52,11 +52,13 @@ NEIGHBOUR_SAMPLE_LIMIT = 16  # per hashed cell: crowded cells are sampled (unbia
 _EPS = 1e-12
 _SIGN_AND_LOW = np.int8(-127)  # 0b10000001: the sign bit and the lowest bit of an int8 pattern code
 _ROW = np.dtype((np.void, 24))  # one (x, y, z) float64 row as a 24-byte record
+_QUAT_ROW = np.dtype((np.void, 32))  # one (w, x, y, z) float64 row as a 32-byte record
 
 
 def _rows(array: F64) -> NDArray[np.void]:
-    """A C-contiguous (n, 3) float64 array seen as n 24-byte records (raises on any other layout)."""
-    return array.view(_ROW)[:, 0]
+    """A C-contiguous (n, 3) float64 array seen as n 24-byte records, or an (n, 4) one as 32-byte records (raises
+    on any other layout)."""
+    return array.view(_ROW if array.shape[1] == 3 else _QUAT_ROW)[:, 0]
 
 
 def _take_rows(array: F64, rows: NDArray[np.int64]) -> F64:
@@ -340,7 +342,7 @@ def _remove_dead(buf: ParticleBuffer) -> int:
     (:func:`.kernels.dead_moves`); returns how many died."""
     dead, holes, movers = dead_moves(buf.age, buf.lifetime, buf.count)
     if holes.size:  # as many live particles above the new count move down into them
-        for array in buf.arrays():  # loop over the particle arrays; (n, 3) ones moved as 24-byte records
+        for array in buf.arrays():  # loop over the particle arrays; (n, 3) and (n, 4) ones moved as records
             flat = _rows(array) if array.ndim == 2 else array
             flat.put(holes, flat.take(movers))
     buf.count -= dead
@@ -409,6 +411,7 @@ def _emit(emitters: list[_Emitter], dt: float) -> None:
         buf.lifetime[s] = cfg.beam_range / cfg.beam_speed
         buf.pattern[s] = BEAM
         buf.control[s] = 0
+        buf.frame[s] = e.transform.rotation
         buf.count += count
         e.state.emitted += count
 
@@ -568,9 +571,10 @@ def _accelerations(splash: _Splashes, repulsion: F64) -> F64:
     return acceleration
 
 
-def _land(state: EnergyWaveState, splash: _Splashes, acceleration: F64, own: slice) -> None:
+def _land(cfg: EnergyWaveEmitter, state: EnergyWaveState, splash: _Splashes, acceleration: F64, own: slice) -> None:
     """Turn the beam particles ``own`` of ``splash`` into splash particles at their hit points: circular ones leave
-    with A (eq. 3.4) acting for one frame, irregular ones start at rest (eq. 3.5 steers them)."""
+    with A (eq. 3.4) acting for one frame, irregular ones with eq. 3.5's velocity (E − H) / τ towards their
+    control point (at rest without control points), which the next steps keep steering."""
     buf = state.particles
     rows = splash.rows[own]
     point = splash.point[own]
@@ -584,6 +588,11 @@ def _land(state: EnergyWaveState, splash: _Splashes, acceleration: F64, own: sli
     buf.lifetime[rows] = splash.lifetime[own]
     buf.pattern[rows] = splash.pattern[own]
     buf.control[rows] = splash.control[own]
+    irregular = rows[is_irregular(splash.pattern[own])]
+    if irregular.size and cfg.control_points:
+        target = _irregular_targets(cfg, state, irregular)
+        _put_rows(buf.velocity, irregular, (target - _take_rows(buf.hit_point, irregular))
+                  / buf.lifetime[irregular][:, None])
     state.hits_per_pattern += np.bincount(splash.pattern[own], minlength=len(PATTERNS))
 
 
@@ -612,17 +621,24 @@ def _send_events(world: World, emitter: int, colliders: list[ColliderEntry], whi
         world.events.send(EnergyWaveHit(emitter, target, at, nn, i, energy, count, trigger))
 
 
-def _steer_irregular(cfg: EnergyWaveEmitter, state: EnergyWaveState, transform: Transform, irregular: NDArray[np.int64],
-                     dt: float) -> None:
+def _steer_irregular(cfg: EnergyWaveEmitter, state: EnergyWaveState, irregular: NDArray[np.int64], dt: float) -> None:
     """Irregular particles (slots ``irregular``) aim at their control point so that they arrive when τ runs out
     (eq. 3.5)."""
     buf = state.particles
-    local = control_point_offsets(cfg, state.time, _noise(state))
-    world_offsets = quat_rotate(transform.rotation, local)
-    control = np.minimum(buf.control[irregular], len(local) - 1)  # the config may have lost points since
-    target = buf.hit_point[irregular] + world_offsets[control] + buf.target_offset[irregular]
+    target = _irregular_targets(cfg, state, irregular)
     remaining = np.maximum(buf.lifetime[irregular] - buf.age[irregular] + dt, dt)  # age already advanced
     buf.velocity[irregular] = (target - buf.position[irregular]) / remaining[:, None]
+
+
+def _irregular_targets(cfg: EnergyWaveEmitter, state: EnergyWaveState, rows: NDArray[np.int64]) -> F64:
+    """Where the irregular particles ``rows`` fly to (eq. 3.5): E = H + the chosen control point at the emitter's
+    current time, in the frame of the wave each particle came with (its emission rotation, so turning the
+    emitter afterwards does not swing splashes already flying), plus its random spread."""
+    buf = state.particles
+    local = control_point_offsets(cfg, state.time, _noise(state))
+    control = np.minimum(buf.control[rows], len(local) - 1)  # the config may have lost points since
+    offsets = quat_rotate(buf.frame[rows], local[control])
+    return buf.hit_point[rows] + offsets + buf.target_offset[rows]
 
 
 def _advance(e: _Emitter, dt: float) -> None:
@@ -635,7 +651,7 @@ def _advance(e: _Emitter, dt: float) -> None:
     e.beam, e.start, irregular = advance_particles(buf.position, buf.velocity, buf.age, buf.pattern, buf.count, dt,
                                                    steer)
     if irregular.size:
-        _steer_irregular(e.cfg, e.state, e.transform, irregular, dt)
+        _steer_irregular(e.cfg, e.state, irregular, dt)
         move_rows(buf.position, buf.velocity, irregular, dt)
 
 
@@ -684,7 +700,7 @@ def _collide(world: World, emitters: list[_Emitter]) -> None:
         own = slice(int(first[i]), int(first[i + 1]))
         if own.start == own.stop:
             continue
-        _land(e.state, splash, acceleration, own)
+        _land(e.cfg, e.state, splash, acceleration, own)
         rows = hit[own]
         _send_events(world, e.entity, colliders, result.collider[rows], splash.point[own], splash.normal[own],
                      splash.incoming[own], e.cfg.particle_mass)

@@ -1,7 +1,7 @@
 #version 330
 // Energy-wave sprites (seeds/000, section 3.4), expanded on the GPU from one record per particle.
 // Records live in an RGBA32F texture, three texels each: (position, alpha), (hit point P0, -), (direction d, -).
-// Quads (the default; POINTS below): no instancing (llvmpipe pays a fixed cost per instance): vertex v of a draw is corner v % 4 of sprite k = v / 4
+// Quads (POINTS below, the default: render.py point_sprites): no instancing (llvmpipe pays a fixed cost per instance): vertex v of a draw is corner v % 4 of sprite k = v / 4
 // (an index buffer makes the quad's two triangles, so each corner is shaded once), and sprite k is sub-sprite
 // j = k % sprites of particle first + k / sprites:
 //   mode 0: one sprite at the particle (beam particles, grains);

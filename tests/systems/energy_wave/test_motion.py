@@ -204,6 +204,52 @@ def test_control_points_are_relative_to_the_wave_direction():
                                np.tile(offset / np.linalg.norm(offset), (len(v), 1)), atol=1e-9)
 
 
+def test_turning_the_emitter_after_the_hit_does_not_swing_the_splash():
+    """Control points are relative to the direction of the wave a particle came with (eq. 3.5): the player
+    turning after firing must not rotate splashes already flying (they swung into the wall before)."""
+    from engine.spatial import quat_from_euler
+
+    point = [1.0, 0.0, 0.0]
+    app, entity, st = _burst_at_wall(circular_probability=0.0, control_points=[{"position": point}], count=200,
+                                     ticks=4, lifetime_frames=30.0)
+    fired = app.world.get(entity, Transform).rotation.copy()
+    app.world.get(entity, Transform).rotation = quat_from_euler(np.pi / 2, 0.0, 0.0)  # turn 90° about y
+    arrived = []
+    for _ in range(40):
+        app.step(1)
+        done = np.abs(live(st, "age") - 30 * FRAME) < 1e-9
+        if done.any():
+            target = live(st, "hit_point")[done] + quat_rotate(fired, np.array(point))
+            arrived.append(np.abs(live(st, "position")[done] - target).max())
+    assert arrived and max(arrived) < 1e-9
+    assert np.all(live(st, "position")[:, 2] >= WALL_Z - 1e-9)  # none inside the wall
+
+
+def test_irregular_particles_leave_the_hit_with_the_velocity_of_eq_3_5():
+    """On the step of the hit an irregular particle already moves at (E - H) / τ, so its bar is drawn along its
+    path (at rest it had no direction and was drawn pointing up)."""
+    from systems.energy_wave.extract import _directions
+
+    point = [0.6, 0.0, 0.8]
+    app = make_app(2)
+    add_box(app, (0.0, 0.0, WALL_Z - 0.25), (3.0, 3.0, 0.25))
+    entity, cfg, st = add_emitter(app, emitting=False, beam_speed=10.0, circular_probability=0.0,
+                                  control_points=[{"position": point}], lifetime_frames=30.0)
+    fire(app.world, entity, count=300, duration=0.05)
+    for _ in range(20):
+        app.step(1)
+        landed = (live(st, "pattern") >= 0) & (live(st, "age") == 0.0)
+        if landed.any():
+            break
+    else:
+        pytest.fail("no particle hit the wall")
+    expected = np.array(point) / (30 * FRAME)
+    np.testing.assert_allclose(live(st, "velocity")[landed], np.tile(expected, (int(landed.sum()), 1)), atol=1e-9)
+    d = _directions(live(st, "velocity")[landed], live(st, "acceleration")[landed],
+                    live(st, "position")[landed] - live(st, "hit_point")[landed])
+    np.testing.assert_allclose(np.abs(d @ (expected / np.linalg.norm(expected))), 1.0, atol=1e-9)
+
+
 # ---------------------------------------------------------------------------------------------------- collisions
 def _events(app, etype, ticks):
     reader = app.world.events.reader(etype)
