@@ -43,6 +43,17 @@ DisplaySize = Annotated[list[Annotated[int, Field(ge=8, le=256)]], Field(min_len
 MAX_BLOB_CELLS = 8.0  # longest blob semi-axis, in display cells (bounds the splat stencil)
 MAX_SOLVER_WORK = 64 ** 3 * 128  # simulation cells × (diffusion + pressure iterations) a tick: 32³ × 48 in the paper
 MAX_DISPLAY_CELLS = 128 * 128 * 256  # display (isosurface) cells: 64³ in the paper
+COARSEST_CELLS = 64  # the pressure solver's multigrid halves the grid until it has at most this many cells ...
+MAX_COARSEST_CELLS = 512  # ... or a side is odd or below 4; a dense inverse solves that level (512²: 2 MB, ~0.1 s)
+
+
+def coarsest_shape(shape: tuple[int, ...]) -> tuple[int, ...]:
+    """The multigrid's coarsest level for a simulation grid of ``shape`` (systems.toon_smoke.poisson): halved
+    while it has more than :data:`COARSEST_CELLS` cells and every side is even and at least 4."""
+    shape = tuple(int(n) for n in shape)
+    while math.prod(shape) > COARSEST_CELLS and all(n % 2 == 0 and n >= 4 for n in shape):
+        shape = tuple(n // 2 for n in shape)
+    return shape
 
 
 class SmokeSourceConfig(ConfigModel):
@@ -186,6 +197,19 @@ class ToonSmokeVolumeConfig(ConfigModel):
                              f"{len(self.ramp_colors)}: give one start position per colour")
         if self.ramp_positions[0] != 0.0 or any(b <= a for a, b in zip(self.ramp_positions, self.ramp_positions[1:])):
             raise ValueError(f"ramp_positions {list(self.ramp_positions)} must start at 0 and increase strictly")
+        coarsest = coarsest_shape(sim)
+        if math.prod(coarsest) > MAX_COARSEST_CELLS:
+            raise ValueError(f"simulation_resolution {list(sim)} halves only down to {list(coarsest)} = "
+                             f"{math.prod(coarsest)} cells for the pressure solver's coarsest level (every side must "
+                             f"stay even and at least 4), more than {MAX_COARSEST_CELLS}: keep the sides within a "
+                             f"factor of 8 of each other (e.g. {[max(n, max(sim) // 8) for n in sim]})")
+        if self.iso_density >= self.density_limit:
+            raise ValueError(f"iso_density {self.iso_density:g} must be below density_limit {self.density_limit:g}: "
+                             "the display density never exceeds the limit, so no surface would be drawn")
+        if self.particle_density_threshold >= self.density_limit:
+            raise ValueError(f"particle_density_threshold {self.particle_density_threshold:g} must be below "
+                             f"density_limit {self.density_limit:g}: the density never exceeds the limit, so no "
+                             "particle would add a blob")
         work, display_cells = self._solver_work(), math.prod(disp)
         if work > MAX_SOLVER_WORK:
             raise ValueError(f"simulation_resolution {list(sim)} × (diffusion_iterations + pressure_iterations) = "

@@ -4,8 +4,9 @@ One step of the incompressible Navier–Stokes equations
 
     ∂u/∂t = −(u·∇)u − ∇p/ρ + ν∇²u + f,   ∇·u = 0
 
-is split as in Stam: self-advection (semi-Lagrangian, clamped back-traces), external forces (buoyancy, vorticity
-confinement, sources), implicit viscous diffusion, and the pressure projection (:mod:`.poisson`).  Density ρ and
+is split as in Stam, in the paper's order: external forces (buoyancy, vorticity confinement, sources),
+self-advection (semi-Lagrangian, clamped back-traces), implicit viscous diffusion, and the pressure projection
+(:mod:`.poisson`).  Density ρ and
 temperature T are then advected by the projected velocity, diffused and dissipated.  Velocities are in m/s, the
 grid spacing h in metres; everything the state keeps is float32.
 """

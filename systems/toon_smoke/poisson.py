@@ -24,11 +24,12 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 from numpy.typing import NDArray
 
+from components.toon_smoke import MAX_COARSEST_CELLS, coarsest_shape
+
 F32 = NDArray[np.float32]
 
 __all__ = ["PoissonHierarchy", "SolveReport", "build_hierarchy", "solve"]
 
-_COARSEST_CELLS = 64  # stop coarsening at or below this many cells (dense inverse there)
 _SMOOTH_SWEEPS = 2  # red-black Gauss-Seidel sweeps before and after each coarse correction
 
 
@@ -259,15 +260,18 @@ def _dense_operator(level: Level) -> NDArray[np.float64]:
 
 
 def build_hierarchy(solid: NDArray[np.bool_], open_faces: tuple[bool, ...]) -> PoissonHierarchy:
-    """Levels from the fine solid mask down to ≤ 64 cells (halving while every side is even and ≥ 4)."""
+    """Levels from the fine solid mask down to :func:`components.toon_smoke.coarsest_shape` (≤ 64 cells unless a
+    side turns odd or drops below 4 first; the config refuses grids whose coarsest level exceeds
+    ``MAX_COARSEST_CELLS``, whose dense inverse would take seconds to build)."""
     level = _make_level(*face_coefficients(solid, tuple(open_faces)))
     levels = [level]
-    while (np.prod(level.shape) > _COARSEST_CELLS and all(n % 2 == 0 and n >= 4 for n in level.shape)):
+    coarsest = coarsest_shape(solid.shape)
+    while level.shape != coarsest:
         level = _coarsen(level)
         levels.append(level)
-    if np.prod(level.shape) > 4096:
-        raise ValueError(f"grid {levels[0].shape} cannot be coarsened below {level.shape}: use sides that are "
-                         "multiples of 8")
+    if np.prod(level.shape) > MAX_COARSEST_CELLS:
+        raise ValueError(f"grid {levels[0].shape} halves only down to {level.shape}: keep the sides within a factor "
+                         "of 8 of each other")
     level.dense_inverse = np.linalg.pinv(_dense_operator(level)) if level.active.any() else np.zeros((0, 0))
     padded_index = np.arange(level.flat.x.size).reshape(level.flat.padded_shape)[1:-1, 1:-1, 1:-1]
     level.dense_cells = padded_index[level.active]  # C order, as the rows of the dense operator

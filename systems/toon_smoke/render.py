@@ -8,8 +8,8 @@ Per view, two passes go into the render graph:
 * ``toon_smoke.outline.<view>``: reads the edge buffer and paints the silhouette and inner contour lines over the
   view's colour.
 
-The meshes are uploaded only when the simulation re-meshed (``mesh_version``).  At most 16 volumes are drawn (the
-outline pass keeps their parameters in uniform arrays).
+The meshes are uploaded only when the simulation re-meshed (``mesh_version``).  Any number of volumes is drawn; the
+outline pass keeps their parameters in uniform arrays and runs in batches of 64 volumes.
 """
 
 from __future__ import annotations

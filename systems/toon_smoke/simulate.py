@@ -76,11 +76,14 @@ def update_obstacles(world: World | None, entity: int, transform: Transform, cfg
                      state: ToonSmokeState) -> None:
     """Solid cells on both grids: the volume's sphere obstacle and, optionally, other entities' colliders.
 
-    Masks and the multigrid hierarchy are rebuilt only when the volume or an overlapping collider moved.
+    Masks and the multigrid hierarchy are rebuilt only when an overlapping collider moved, or the volume moved
+    relative to the colliders it overlaps (the sphere obstacle lives in the volume's own frame, so a volume that
+    moves with no collider in reach keeps its masks).
     """
     geo = _geometry(cfg, state)
     colliders = _overlapping_colliders(world, entity, transform, cfg) if world is not None else []
-    key = (transform.position.tobytes(), transform.rotation.tobytes(),
+    placement = (transform.position.tobytes(), transform.rotation.tobytes()) if colliders else ()
+    key = (placement, cfg.obstacle_radius, tuple(cfg.obstacle_center),
            tuple((e, t.position.tobytes(), t.rotation.tobytes(), t.scale.tobytes(), id(c), c.shape, c.radius,
                   c.half_extents.tobytes(), c.offset) for e, t, c in colliders))
     if state.solid is not None and state.solid_key == key:

@@ -74,3 +74,25 @@ radius = -1.0
 def test_blob_size_bounded_by_the_splat_stencil(tmp_path):
     text = _error(tmp_path, "blob_radius_max = 0.6\nblob_stretch_max = 3.0")
     assert "blob_radius_max" in text and "display cells" in text
+
+
+def test_grids_whose_coarsest_multigrid_level_is_large_are_refused(tmp_path):
+    """8 x 128 x 128 halves only to 2 x 32 x 32 (2048 cells): its dense coarsest inverse took 6.7 s to build and
+    27 ms a V-cycle. 16 x 128 x 128 stops at 2 x 16 x 16 = 512 and is accepted."""
+    from components.toon_smoke import ToonSmokeVolumeConfig, coarsest_shape
+
+    assert coarsest_shape((8, 128, 128)) == (2, 32, 32) and coarsest_shape((16, 128, 128)) == (2, 16, 16)
+    assert coarsest_shape((32, 32, 32)) == (4, 4, 4) and coarsest_shape((24, 48, 24)) == (3, 6, 3)
+    text = _error(tmp_path, "simulation_resolution = [8, 128, 128]\ndisplay_resolution = [8, 128, 128]\n"
+                            "extent = [0.5, 8.0, 8.0]\npressure_iterations = 20\ndiffusion_iterations = 1")
+    assert "simulation_resolution" in text and "[2, 32, 32]" in text and "[16, 128, 128]" in text
+    ToonSmokeVolumeConfig.model_validate({"simulation_resolution": [16, 128, 128], "display_resolution":
+                                          [16, 128, 128], "extent": [1.0, 8.0, 8.0], "pressure_iterations": 20,
+                                          "diffusion_iterations": 1})
+
+
+def test_levels_the_density_never_reaches_are_refused(tmp_path):
+    text = _error(tmp_path, "iso_density = 4.0\ndensity_limit = 4.0")
+    assert "iso_density" in text and "density_limit" in text
+    text = _error(tmp_path, "particle_density_threshold = 5.0\ndensity_limit = 4.0")
+    assert "particle_density_threshold" in text and "blob" in text

@@ -100,7 +100,7 @@ def test_particles_add_blobs_only_above_the_threshold():
     cfg = small()
     state = run_state(cfg, 25)
     assert 0 < state.blob_count < cfg.particle_count
-    high = run_state(small(particle_density_threshold=100.0), 25)
+    high = run_state(small(particle_density_threshold=100.0, density_limit=200.0), 25)
     assert high.blob_count == 0
 
 
