@@ -109,7 +109,8 @@ class WaterSurface(ConfigModel):
     disturbance_rate: float = Field(0.0, ge=0.0, le=10000.0,
                                     description="Random drops (wind gusts, rain) per second over the whole surface.")
     disturbance_height: float = Field(0.05, ge=0.0, le=10.0,
-                                      description="Height in metres each random drop pushes the water down by.")
+                                      description="Largest depth in metres a random drop pushes the water down by (each "
+                                                  "drop takes this times a uniform 0.5..1).")
     disturbance_radius: float = Field(0.5, gt=0.0, le=100.0,
                                       description="Radius in metres of each random drop's dent.")
     shallow_color: Color3 = Field((0.10, 0.45, 0.50), description="Water colour where it is shallow (linear RGB).")

@@ -9,7 +9,8 @@ horizontal part is the pressure gradient −ρ·g·∇η, so waves push bodies) 
 buoyancy, so bodies bob and tilt back upright. Drag (implicit, so any drag is stable) slows the body relative
 to the water's vertical motion by ``linear_drag`` per kilogram of displaced water, and its spin by
 ``angular_drag`` × submerged fraction. Integration is semi-implicit Euler, sub-stepped so that the buoyancy
-oscillator ω = √(ρ·g·A/m) satisfies ω·Δt ≤ 0.3 at the engine's fixed step.
+oscillator ω = √(ρ·g·A/m) satisfies ω·Δt ≤ 0.3 at the engine's fixed step (at most ``_MAX_SUBSTEPS`` = 8
+sub-steps, so a very light body at a long fixed step may exceed it).
 
 Contacts with the pool's floor (the water's ``depth``) and walls (its footprint): every penetrating box corner
 (or sphere support point) gets a normal impulse with restitution and a Coulomb friction impulse, averaged over
