@@ -136,16 +136,8 @@ class TerrainConfig(ConfigModel):
         """The PNG must lie inside the configs root and be a whole, readable grayscale image of a sane size;
         checked when the file is validated (the loaders pass ``configs_root`` as validation context) rather than
         at spawn."""
-        if value is None:
-            return value
-        path = _asset_path(value, info)
-        if path is None:
-            return value
-        try:
-            load_heightmap_png(path)  # decoded, as the spawn will: a truncated file fails here, not at spawn
-        except FileNotFoundError:
-            raise ValueError(f"height map not found: {path}") from None
-        if path.suffix.lower() != ".png":
+        path = _checked_asset(value, info, "height map", load_heightmap_png)
+        if path is not None and path.suffix.lower() != ".png":
             raise ValueError(f"height map '{path}' must be a .png file")
         return value
 
@@ -154,29 +146,29 @@ class TerrainConfig(ConfigModel):
     def _texture_file(cls, value: str | None, info: ValidationInfo) -> str | None:
         """The image must lie inside the configs root (or the engine's stock configs) and decode, checked when the
         file is validated, as the height map is."""
-        if value is None:
-            return value
-        path = _asset_path(value, info)
-        if path is None:
-            return value
-        try:
-            load_texture(path)
-        except FileNotFoundError:
-            raise ValueError(f"texture not found: {path}") from None
+        _checked_asset(value, info, "texture", load_texture)
         return value
 
 
-def _asset_path(value: str, info: ValidationInfo) -> Path | None:
-    """The file an asset field names (:func:`engine.config.resolve_asset`); None when validated without a
-    configs root (then only the text is checked: relative, not escaping)."""
+def _checked_asset(value: str | None, info: ValidationInfo, what: str, load) -> Path | None:
+    """The file an asset field names (:func:`engine.config.resolve_asset`), decoded by ``load`` as the spawn will
+    (a truncated file fails at validation, not at spawn); None for no value, or when validated without a configs
+    root (then only the text is checked: relative, not escaping)."""
     from engine.config import resolve_asset
 
+    if value is None:
+        return None
     root = (info.context or {}).get("configs_root")
     if root is None:  # validated alone: only what the text itself shows
         if value.startswith(("/", "\\")) or ":" in value or ".." in Path(value).parts:
             raise ValueError(f"path '{value}' must be relative to the configs root and stay inside it")
         return None
-    return resolve_asset(root, value)  # ValueError names the escape
+    path = resolve_asset(root, value)  # ValueError names the escape
+    try:
+        load(path)
+    except FileNotFoundError:
+        raise ValueError(f"{what} not found: {path}") from None
+    return path
 
 
 @dataclass
