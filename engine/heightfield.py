@@ -11,7 +11,8 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from PIL import Image, UnidentifiedImageError
+
+from engine.images import decode_image, image_header
 
 __all__ = ["HeightField", "MAX_HEIGHTMAP_SIDE", "inspect_heightmap", "load_heightmap_png", "midpoint_displacement"]
 
@@ -156,21 +157,8 @@ def inspect_heightmap(path: str | Path) -> tuple[str, tuple[int, int]]:
     Raises ``FileNotFoundError`` when the file does not exist and ``ValueError`` when it is not an image, not
     grayscale, smaller than 2×2 or larger than :data:`MAX_HEIGHTMAP_SIDE` per side, naming the path each time.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"height map '{path}' not found")
-    try:
-        with Image.open(path) as image:
-            mode, size = image.mode, image.size
-    except (UnidentifiedImageError, Image.DecompressionBombError, OSError) as error:
-        raise ValueError(f"height map '{path}' is not a readable image: {error}") from None
-    if mode not in _GRAY_SCALES:
-        raise ValueError(f"height map '{path}' has image mode {mode!r}; expected 8-bit ('L') or 16-bit ('I;16') "
-                         "grayscale, convert it to grayscale first")
-    if min(size) < 2 or max(size) > MAX_HEIGHTMAP_SIDE:
-        raise ValueError(f"height map '{path}' is {size[0]}×{size[1]} pixels; expected 2 to {MAX_HEIGHTMAP_SIDE} "
-                         "pixels per side")
-    return mode, size
+    return image_header(path, "height map", _GRAY_SCALES, "8-bit ('L') or 16-bit ('I;16') grayscale, convert it "
+                        "to grayscale first", 2, MAX_HEIGHTMAP_SIDE)
 
 
 def load_heightmap_png(path: str | Path, height_scale: float = 1.0) -> F64:
@@ -180,14 +168,7 @@ def load_heightmap_png(path: str | Path, height_scale: float = 1.0) -> F64:
     exist and ``ValueError`` when it is not a readable grayscale image of a sane size (see
     :func:`inspect_heightmap`), naming the path either way.
     """
-    path = Path(path)
     mode, _ = inspect_heightmap(path)
-    try:
-        with Image.open(path) as image:
-            image.load()
-            if mode == "LA":
-                image = image.getchannel("L")
-            values = np.asarray(image, dtype=np.float64)
-    except (UnidentifiedImageError, Image.DecompressionBombError, OSError) as error:
-        raise ValueError(f"height map '{path}' is not a readable image: {error}") from None
+    values = decode_image(path, "height map", lambda image: np.asarray(
+        image.getchannel("L") if mode == "LA" else image, dtype=np.float64))
     return values * (float(height_scale) / _GRAY_SCALES[mode])

@@ -11,7 +11,8 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
-from PIL import Image, UnidentifiedImageError
+
+from engine.images import decode_image, image_header
 
 __all__ = ["MAX_TEXTURE_SIDE", "inspect_texture", "load_texture", "srgb_to_linear"]
 
@@ -30,35 +31,16 @@ _MODES = ("1", "L", "LA", "P", "PA", "RGB", "RGBA", "RGBX", "CMYK", "YCbCr")  # 
 
 def inspect_texture(path: str | Path) -> tuple[int, int]:
     """(width, height) of a texture image, read from its header only.  Raises ``FileNotFoundError`` when the file
-    does not exist and ``ValueError`` when it is not an image, not 8 bits a channel, or not 1 to
+    does not exist and ``ValueError`` when it is not an image, not 8 bits a channel, or larger than
     :data:`MAX_TEXTURE_SIDE` pixels a side, naming the path each time."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"texture '{path}' not found")
-    try:
-        with Image.open(path) as image:
-            mode, size = image.mode, image.size
-    except (UnidentifiedImageError, Image.DecompressionBombError, OSError) as error:
-        raise ValueError(f"texture '{path}' is not a readable image: {error}") from None
-    if mode not in _MODES:
-        raise ValueError(f"texture '{path}' has image mode {mode!r}; expected 8 bits a channel (RGB, RGBA, grey or "
-                         "palette), convert it to 8-bit RGB first")
-    if max(size) > MAX_TEXTURE_SIDE:
-        raise ValueError(f"texture '{path}' is {size[0]}×{size[1]} pixels; expected at most {MAX_TEXTURE_SIDE} "
-                         "pixels per side")
-    return size
+    return image_header(path, "texture", _MODES, "8 bits a channel (RGB, RGBA, grey or palette), convert it to "
+                        "8-bit RGB first", 1, MAX_TEXTURE_SIDE)[1]
 
 
 def load_texture(path: str | Path) -> NDArray[np.float32]:
     """An image as linear RGB in [0, 1], shape (rows, columns, 3), row 0 the image's top row.  Grey and palette
     images are converted to RGB, alpha is dropped.  Errors as :func:`inspect_texture`, also for a file whose
     pixels cannot be decoded (a truncated PNG)."""
-    path = Path(path)
     inspect_texture(path)
-    try:
-        with Image.open(path) as image:
-            image.load()
-            values = np.asarray(image.convert("RGB"), np.float64) / 255.0
-    except (UnidentifiedImageError, Image.DecompressionBombError, OSError) as error:
-        raise ValueError(f"texture '{path}' is not a readable image: {error}") from None
+    values = decode_image(path, "texture", lambda image: np.asarray(image.convert("RGB"), np.float64) / 255.0)
     return srgb_to_linear(values)

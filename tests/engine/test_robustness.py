@@ -115,40 +115,30 @@ def test_bad_preset_reference(tmp_path, capsys, preset, expected):
     assert f"{path}:4: entities[0].components.WaterSurface.preset" in text and repr(preset) in text
 
 
-@pytest.mark.parametrize("heightmap, expected", [
-    ("assets/missing.png", "height map not found"),
-    ("assets/notes.png", "not a readable image"),
-    ("assets/cut.png", "not a readable image"),  # the header reads: validate passed it, the spawn failed
-    ("../../outside.png", "escapes the configs root"),
+@pytest.mark.parametrize("key, value, expected", [
+    ("heightmap", "assets/missing.png", "height map not found"),
+    ("heightmap", "assets/notes.png", "not a readable image"),
+    ("heightmap", "assets/cut.png", "not a readable image"),  # the header reads: validate passed it, the spawn failed
+    ("heightmap", "../../outside.png", "escapes the configs root"),
+    ("texture", "assets/missing.png", "texture not found"),
+    ("texture", "assets/notes.png", "not a readable image"),
+    ("texture", "assets/cut.png", "not a readable image"),  # the header reads; the pixels do not
+    ("texture", "../../outside.png", "escapes the configs root"),
 ])
-def test_bad_heightmap_is_caught_by_validate_with_its_key(tmp_path, capsys, heightmap, expected):
+def test_bad_terrain_asset_is_caught_by_validate_with_its_key(tmp_path, capsys, key, value, expected):
     root = configs(tmp_path)
-    path = scene(root, ENTITY + f'[entities.components.Terrain]\nheightmap = "{heightmap}"\n')
+    path = scene(root, ENTITY + f'[entities.components.Terrain]\n{key} = "{value}"\n')
     (p,) = problems_of(path)
-    assert p.key == "entities[0].components.Terrain.heightmap" and p.value == heightmap and expected in p.message
+    assert p.key == f"entities[0].components.Terrain.{key}" and p.value == value and expected in p.message
     code, text = cli(capsys, "validate", str(path))  # before this, validate passed and only run failed
     assert code == 1 and expected in text
-    good = scene(root, ENTITY + '[entities.components.Terrain]\nheightmap = "assets/hills.png"\n', "good.toml")
+    good = scene(root, ENTITY + f'[entities.components.Terrain]\n{key} = "assets/hills.png"\n', "good.toml")
     assert cli(capsys, "validate", str(good))[0] == 0
 
 
-@pytest.mark.parametrize("texture, expected", [
-    ("assets/missing.png", "texture not found"),
-    ("assets/notes.png", "not a readable image"),
-    ("assets/cut.png", "not a readable image"),  # the header reads; the pixels do not
-    ("../../outside.png", "escapes the configs root"),
-])
-def test_bad_ground_texture_is_caught_by_validate_with_its_key(tmp_path, capsys, texture, expected):
-    root = configs(tmp_path)
-    path = scene(root, ENTITY + f'[entities.components.Terrain]\ntexture = "{texture}"\n')
-    (p,) = problems_of(path)
-    assert p.key == "entities[0].components.Terrain.texture" and p.value == texture and expected in p.message
-    code, text = cli(capsys, "validate", str(path))
-    assert code == 1 and expected in text
-    good = scene(root, ENTITY + '[entities.components.Terrain]\ntexture = "assets/hills.png"\n', "good.toml")
-    assert cli(capsys, "validate", str(good))[0] == 0
-    app = App(good)  # grey 128 decoded from sRGB: 0.2158 in linear light
-    (terrain,) = [t for _, (t,) in app.world.query(Terrain)]
+def test_a_grey_ground_texture_is_decoded_from_srgb(tmp_path):
+    good = scene(configs(tmp_path), ENTITY + '[entities.components.Terrain]\ntexture = "assets/hills.png"\n')
+    (terrain,) = [t for _, (t,) in App(good).world.query(Terrain)]  # grey 128 decoded from sRGB: 0.2158 linear
     assert terrain.texture.shape == (5, 5, 3) and np.allclose(terrain.texture, 0.21586, atol=1e-5)
 
 
