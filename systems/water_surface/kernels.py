@@ -298,10 +298,10 @@ def near_bodies(extent, position, x0, z0, h, nx, nz, y0, depth, heights):
 
 @kernel
 def bodies_in_water(z, solid, solid_flat, need_volume, shapes, half, radius, position, rotation, x0, z0, h, y0,
-                    depth, signs):
+                    depth, signs, plane_margin, plane_cells):
     """The start of a step (``surface.step_water``): the water's mean level (the volume to keep) when
     ``need_volume``, the bodies near the water (:func:`near_bodies`) and their plane levels S'_z − y0
-    (:func:`plane_levels`), and each body's box corners in its own frame, ``signs`` (3, 8) × half extents.
+    (:func:`plane_levels`, windows grown by ``surface.plane_margin``), and each body's box corners in its own frame, ``signs`` (3, 8) × half extents.
     Returns (volume, number near N, number of fallback windows, floats, flags): floats holds the local corners
     (B, 3, 8) then the levels of the near bodies (N), flags (int8) the near mask (B) then the fallback mask (N)
     (two buffers instead of four arrays: each array handed back to Python costs about a microsecond)."""
@@ -319,7 +319,9 @@ def bodies_in_water(z, solid, solid_flat, need_volume, shapes, half, radius, pos
     for b in range(len(near)):
         if near[b]:
             centre[r, 0], centre[r, 1] = (position[b, 0] - x0) / h, (position[b, 2] - z0) / h
-            size[r, 0], size[r, 1] = extent[b, 0] / h, extent[b, 2] / h
+            su, sv = extent[b, 0] / h, extent[b, 2] / h
+            margin = max(plane_margin * max(su, sv), plane_cells)  # surface.plane_margin
+            size[r, 0], size[r, 1] = su + margin, sv + margin
             r += 1
     levels, fallback = plane_levels(z, solid, centre, size)
     floats = np.empty(nb * 3 * nc + count)

@@ -98,6 +98,23 @@ def test_a_tilted_box_rights_itself(tmp_path):
     assert _roll_pitch(app.world.get(raft, Transform).rotation) < 3.0
 
 
+@pytest.mark.parametrize("roll", [45.0, 20.0])
+def test_a_box_floating_tilted_onto_an_edge_stops_bobbing(tmp_path, roll):
+    """A cube at a quarter of water's density floats tilted (on an edge, or about 33° from flat). Its sloped sides
+    move the outline while it bobs; with S' taken over its footprint only, its own outline waves raised S' in phase
+    with the motion and it bobbed 0.24 m (45°) or 0.42 m (20°) peak to peak for good at α = 1."""
+    water = "resolution = [26, 26]\nspacing = 0.4\nwave_speed = 1.5\noutline_constant = 1.0"
+    app = _app(tmp_path, _body("crate", (0.0, 0.3, 0.0), scale=(1.0, 1.0, 1.0), rotation=(0.0, 0.0, roll),
+                               mass=250.0), water)
+    crate = _entity(app, "crate")
+    app.step(12 * 60)
+    heights = []
+    for _ in range(3 * 60):
+        app.step(1)
+        heights.append(app.world.get(crate, Transform).position[1])
+    assert np.ptp(heights) < 0.01
+    assert 25.0 < _roll_pitch(app.world.get(crate, Transform).rotation) < 65.0  # still tilted: it did float
+
 def test_a_script_impulse_changes_the_velocity_by_j_over_m(tmp_path):
     app = _app(tmp_path, _body("crate", (0.0, 30.0, 0.0), mass=50.0, linear_damping=0.0))
     crate = _entity(app, "crate")

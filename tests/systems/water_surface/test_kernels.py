@@ -197,8 +197,8 @@ def test_a_step_without_report_leaves_the_same_state():
 
 
 def test_a_window_all_inside_a_body_falls_back_to_numpys_plane_level(monkeypatch):
-    """A body whose footprint window (> 8192 vertices) was all inside it at the last step: its plane level is
-    numpy's (the fallback of step_water), the same bits as the reference step; a far body is left out."""
+    """A body whose S' window (> 8192 vertices; here the whole grid) was all inside it at the last step: its plane
+    level is numpy's (the fallback of step_water), the same bits as the reference step; a far body is left out."""
     grid = make_grid(120, 0.4)
     fast, slow = make_state(grid), make_state(grid)
     rng = np.random.default_rng(9)
@@ -214,7 +214,7 @@ def test_a_window_all_inside_a_body_falls_back_to_numpys_plane_level(monkeypatch
 
     monkeypatch.setattr(K, "bodies_in_water", spy)
     for t in range(4):
-        bodies = _join(box(0.3 + 0.05 * t, -0.2, half=(20.0, 1.0, 20.5), y=0.2),
+        bodies = _join(box(0.3 + 0.05 * t, -0.2, half=(25.0, 1.0, 25.5), y=0.2),
                        box(0.0, 0.0, half=(1.0, 0.5, 1.0), y=50.0, entity=8))  # far above the water
         step_water(fast, cfg, grid, bodies, DT, report=False)
         reference.step_water(slow, cfg, grid, bodies, DT)
