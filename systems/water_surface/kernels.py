@@ -906,6 +906,78 @@ def point_pairs(uv, nx, nz):
     return out_a, out_b, out_w
 
 
+PEEK = 1e-3  # outline.PEEK
+PEEK_MARGIN = 1e-9  # outline.PEEK_MARGIN
+
+
+@kernel(inline="always")
+def _enters(table, b, pu, pv, tu, tv):
+    """``outline._enters``: the segment from (pu, pv) on polygon b's outline towards (tu, tv) starts into it."""
+    du, dv = tu - pu, tv - pv
+    length = math.sqrt(du * du + dv * dv)
+    if not length > 0.0:
+        return False
+    step = PEEK / length
+    return _inside(table, b, pu + du * step, pv + dv * step, PEEK_MARGIN)
+
+
+@kernel
+def through_bodies(table, uv, body, g, p, w, a, b, w2, nx):
+    """``outline.through_bodies``: the coupling pairs less those whose segment crosses a cross-section (from an
+    outline point, its first ``PEEK`` towards its partner lies inside the point's polygon)."""
+    n = 0
+    for q in range(len(g)):
+        c = g[q]
+        i = p[q]
+        if not _enters(table, body[i], uv[i, 0], uv[i, 1], np.float64(c % nx), np.float64(c // nx)):
+            g[n], p[n], w[n] = c, i, w[q]
+            n += 1
+    n2 = 0
+    for q in range(len(a)):
+        i, j = a[q], b[q]
+        if not (_enters(table, body[i], uv[i, 0], uv[i, 1], uv[j, 0], uv[j, 1])
+                or _enters(table, body[j], uv[j, 0], uv[j, 1], uv[i, 0], uv[i, 1])):
+            a[n2], b[n2], w2[n2] = i, j, w2[q]
+            n2 += 1
+    return g[:n], p[:n], w[:n], a[:n2], b[:n2], w2[:n2]
+
+
+@kernel
+def cut_edges(uv, kind, mask, nx, nz):
+    """``outline.cut_edges``: grid edges between two water vertices that an outline crosses (twice: a body
+    thinner than h between them), (lower, upper) flat vertex indices, each once, ascending by 2·lower +
+    direction."""
+    m = len(uv)
+    s = mask.ravel()
+    key = np.empty(m, np.int64)
+    n = 0
+    for q in range(m):
+        if kind[q] >= 2:
+            continue
+        along_v = kind[q] == 0
+        i = np.int64(np.rint(uv[q, 0])) if along_v else np.int64(math.floor(uv[q, 0]))
+        j = np.int64(math.floor(uv[q, 1])) if along_v else np.int64(np.rint(uv[q, 1]))
+        if i < 0 or j < 0 or i + (0 if along_v else 1) >= nx or j + (1 if along_v else 0) >= nz:
+            continue
+        lo = j * nx + i
+        hi = lo + (nx if along_v else 1)
+        if s[lo] or s[hi]:
+            continue
+        key[n] = 2 * lo + (1 if along_v else 0)
+        n += 1
+    key = np.sort(key[:n])
+    lo_out = np.empty(n, np.int64)
+    hi_out = np.empty(n, np.int64)
+    u = 0
+    for q in range(n):
+        if q > 0 and key[q] == key[q - 1]:
+            continue
+        lo_out[u] = key[q] // 2
+        hi_out[u] = lo_out[u] + (nx if key[q] % 2 == 1 else 1)
+        u += 1
+    return lo_out[:u], hi_out[:u]
+
+
 # ---------------------------------------------------------------------------------------------- propagation
 @kernel
 def wave_grid(z, zp, k, new):
@@ -949,17 +1021,18 @@ def _wave_vertex(z, zp, k, new, j, i, up, down):
 
 
 @kernel
-def wave_step(z, zp, k, degree, solid, mask, g, p, w, a, b, w2, points, points_prev, new, slots):
+def wave_step(z, zp, k, degree, solid, mask, cut_lo, cut_hi, g, p, w, a, b, w2, points, points_prev, new, slots):
     """One step of eq. 2.8–2.12 (``waves.propagate``): the grid by :func:`wave_grid` into ``new`` (may be ``zp``),
     then the water vertices next to bodies (``solid``: they lose those neighbours, the wave reflects) or to added
     points (pairs ``g``, ``p``, ``w``) again with their own neighbours (eq. 2.11, k lowered to 2/D where the added
     neighbours raise the sum of weights D above 4), and the added points from the grid vertices and points within
-    radius h (eq. 2.12; point pairs ``a``, ``b``, ``w2``). ``slots``: an int64 work array of at least the grid's
-    size (its contents do not matter). Returns the added points' heights at t + 1."""
+    radius h (eq. 2.12; point pairs ``a``, ``b``, ``w2``); the ends ``cut_lo``, ``cut_hi`` of grid edges a thin
+    body lies across lose each other. ``slots``: an int64 work array of at least the grid's size (its contents
+    do not matter). Returns the added points' heights at t + 1."""
     nz, nx = z.shape
     zf, zpf, mf = z.ravel(), zp.ravel(), mask.ravel()
     # eq. 2.11: per touched vertex, its extra sums in order of entry (solid neighbours first, then point pairs)
-    entries = 4 * len(solid) + len(g)
+    entries = 4 * len(solid) + 2 * len(cut_lo) + len(g)
     touched = np.empty(entries, np.int64)
     value = np.empty(entries)
     weight = np.empty(entries)
@@ -989,6 +1062,10 @@ def wave_step(z, zp, k, degree, solid, mask, g, p, w, a, b, w2, points, points_p
                 continue
             touched[e], value[e], weight[e] = t, held, -1.0
             e += 1
+    for q in range(len(cut_lo)):  # the two ends of an edge a thin body lies across lose each other
+        touched[e], value[e], weight[e] = cut_lo[q], -zf[cut_hi[q]], -1.0
+        touched[e + 1], value[e + 1], weight[e + 1] = cut_hi[q], -zf[cut_lo[q]], -1.0
+        e += 2
     for q in range(len(g)):  # and the vertices near added points gain them (weight r_k / h)
         touched[e], value[e], weight[e] = g[q], w[q] * points[p[q]], w[q]
         e += 1
@@ -1161,7 +1238,8 @@ def outline_step(z, zp, k, degree, new, rotated, shapes, position, radius, plane
     """One step of the outline method after the plane levels (``surface._outline_step``): cross-sections D'
     (``corners`` (B, 3, 8) of the boxes, spheres by ``ring``), nudged; added points; their carried heights; the
     waves they make (eq. 2.5–2.7, against D'(t − 1): :func:`previous_table`); the vertices inside
-    bodies; the coupling pairs; eq. 2.8–2.12 into ``new``; volume and damping.
+    bodies; the coupling pairs (less those across a body) and the grid edges across thin bodies; eq. 2.8–2.12
+    into ``new``; volume and damping.
 
     Returns its results packed in three buffers (boxing an array for Python costs about a microsecond: one
     buffer per type instead of one array per result), the mask of the vertices inside bodies and the sizes:
@@ -1210,7 +1288,10 @@ def outline_step(z, zp, k, degree, new, rotated, shapes, position, radius, plane
     mask, unique = solid_mask(solid, nz, nx)
     g, p, w = grid_pairs(uv, mask, nx, nz)
     a, b2, w2 = point_pairs(uv, nx, nz)
-    new_points = wave_step(z, zp, k, degree, solid, mask, g, p, w, a, b2, w2, heights, previous, new, slots)
+    g, p, w, a, b2, w2 = through_bodies(after, uv, body, g, p, w, a, b2, w2, nx)
+    cut_lo, cut_hi = cut_edges(uv, kind, mask, nx, nz)
+    new_points = wave_step(z, zp, k, degree, solid, mask, cut_lo, cut_hi, g, p, w, a, b2, w2, heights, previous,
+                           new, slots)
     previous_points = finish(z, new, solid, owner, levels, unique, volume, damping, new_points, change, heights)
     m, n_seg, n_solid, n_unique, bw = len(uv), len(segments), len(solid), len(unique), nb * width
     floats = np.empty(5 * m + 11 * bw)

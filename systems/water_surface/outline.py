@@ -25,8 +25,8 @@ from engine.exact import matmul
 from systems.water_surface.geometry import (BOX, EPS_LINE, F64, I64, NUDGE, Bodies, Grid, all_of, any_of, max_of,
                                             min_of, ranges, sum_of)
 
-__all__ = ["AddedPoints", "Edges", "Sections", "added_points", "coupling_pairs", "cross_sections",
-           "nearest_on_outline", "nudge", "outline_impulse", "solid_vertices"]
+__all__ = ["AddedPoints", "Edges", "Sections", "added_points", "coupling_pairs", "cross_sections", "cut_edges",
+           "nearest_on_outline", "nudge", "outline_impulse", "solid_vertices", "through_bodies"]
 
 # Box corners c = (sx, sy, sz) ∈ {−1, 1}³ and its 12 edges (corner pairs that differ along one axis).
 _SIGNS = np.array([[sx, sy, sz] for sx in (-1.0, 1.0) for sy in (-1.0, 1.0) for sz in (-1.0, 1.0)])
@@ -572,3 +572,64 @@ def coupling_pairs(points: AddedPoints, fluid: np.ndarray, grid: Grid, solid_mas
     close = (dd < 1.0) & ((around > 0) | (first < second))
     a, b, weight = first[close], second[close], 1.0 - dd[close]
     return g, p_idx, w, np.concatenate([a, b]), np.concatenate([b, a]), np.concatenate([weight, weight])
+
+
+PEEK = 1e-3  # grid units: how far along a coupling pair its end on an outline looks into the cross-section
+PEEK_MARGIN = 1e-9  # inside by more than this (a pair along one edge of D' stays on it: about 1e-13 off)
+
+
+def _enters(rows: F64, pu: F64, pv: F64, tu: F64, tv: F64) -> np.ndarray:
+    """Whether the segments from points (pu, pv) on outlines towards (tu, tv) start into the cross-section, given
+    the rows (normal u, normal v, c) of the points' polygons, (3, V, P)."""
+    du, dv = tu - pu, tv - pv
+    length = np.sqrt(du * du + dv * dv)
+    real = length > 0.0
+    step = PEEK / np.where(real, length, 1.0)
+    return _inside(rows, pu + du * step, pv + dv * step, PEEK_MARGIN) & real
+
+
+def through_bodies(points: AddedPoints, edges: Edges, grid: Grid, pairs: tuple) -> tuple:
+    """The coupling pairs (``coupling_pairs``) less those whose segment crosses a cross-section: a grid vertex
+    and an added point, or two added points, on opposite sides of a body thinner than h (or across a corner of
+    one) are not water neighbours, so the body reflects the wave instead of letting it through. The segment
+    from an outline point towards its partner crosses when its first ``PEEK`` lies inside the point's polygon
+    (a point's polygon is convex and the point is on its outline)."""
+    g, p, w, a, b, w2 = pairs
+    if len(points) == 0:
+        return pairs
+    u, v = np.ascontiguousarray(points.uv.T)
+    rows = edges.table[4:7]
+    gv, gu = np.divmod(g, grid.nx)
+    keep = ~_enters(rows.take(points.body.take(p), axis=2), u.take(p), v.take(p), gu.astype(np.float64),
+                    gv.astype(np.float64))
+    ua, va, ub, vb = u.take(a), v.take(a), u.take(b), v.take(b)
+    keep2 = ~(_enters(rows.take(points.body.take(a), axis=2), ua, va, ub, vb)
+              | _enters(rows.take(points.body.take(b), axis=2), ub, vb, ua, va))
+    return g[keep], p[keep], w[keep], a[keep2], b[keep2], w2[keep2]
+
+
+def cut_edges(points: AddedPoints, solid: np.ndarray, grid: Grid) -> tuple[I64, I64]:
+    """Grid edges between two water vertices that an outline crosses: (lower vertex, upper vertex) (flat
+    indices), each once, ascending by lower vertex then by direction (along u before along v).
+
+    A convex outline that crosses a grid edge once leaves one end inside the body; crossing it with both ends in
+    the water, it crosses twice: the body lies between two vertices thinner than h, and they must not be each
+    other's neighbours (eq. 2.8 on the grid would carry the wave straight through it)."""
+    kind = points.kind
+    on_line = kind < 2
+    if not any_of(on_line, axis=None):
+        z = np.zeros(0, np.int64)
+        return z, z
+    u, v = points.uv[on_line, 0], points.uv[on_line, 1]
+    along_v = kind[on_line] == 0  # on a line u = i: the edge from (i, floor v) to (i, floor v + 1)
+    i = np.where(along_v, np.rint(u), np.floor(u)).astype(np.int64)
+    j = np.where(along_v, np.floor(v), np.rint(v)).astype(np.int64)
+    step = np.where(along_v, grid.nx, 1)
+    ok = (i >= 0) & (j >= 0) & (i + ~along_v < grid.nx) & (j + along_v < grid.nz)
+    lo = j * grid.nx + i
+    hi = lo + step
+    flat = solid.ravel()
+    ok[ok] = ~flat[lo[ok]] & ~flat[hi[ok]]
+    key = np.unique(2 * lo[ok] + along_v[ok])
+    lo, direction = np.divmod(key, 2)
+    return lo, lo + np.where(direction == 1, grid.nx, 1)

@@ -86,14 +86,16 @@ def _vertex_groups(touched: I64, slots: I64) -> tuple[I64, I64]:
 def propagate(z: F64, zp: F64, k: float, coefficient: F64, degree: F64, solid: I64 | None = None,
               pairs: tuple = (), points: F64 | None = None, points_prev: F64 | None = None,
               scratch: F64 | None = None, reuse: bool = False, solid_mask: np.ndarray | None = None,
-              slots: I64 | None = None) -> tuple[F64, F64]:
+              slots: I64 | None = None, cut: tuple = ()) -> tuple[F64, F64]:
     """One step of eq. 2.8–2.12: (grid heights at t+1, added-point heights at t+1).
 
     ``coefficient`` = 2 − k·``degree`` with ``degree`` = :func:`free_degree` (the open grid's neighbour counts);
     ``solid`` holds the flat indices of vertices inside bodies, which their neighbours do not count (their own
     new heights are not meaningful: the caller holds them); ``pairs`` = (grid vertex, point, weight, point,
-    point, weight) from ``outline.coupling_pairs``. The regular update runs on the whole grid; the water vertices
-    next to a body or to added points are then updated again with their own neighbours (eq. 2.11).
+    point, weight) from ``outline.coupling_pairs``; ``cut`` = (lower, upper) vertices of grid edges a body lies
+    across (``outline.cut_edges``), which are not each other's neighbours. The regular update runs on the whole
+    grid; the water vertices next to a body or to added points are then updated again with their own neighbours
+    (eq. 2.11).
     ``solid_mask`` (the grid's shape, True at ``solid``), ``slots`` (an int64 array of the grid's size) and
     ``scratch`` (the grid's shape) are work arrays the caller may keep between steps; with ``reuse`` the result
     is written over ``zp``, which the caller no longer needs.
@@ -110,6 +112,11 @@ def propagate(z: F64, zp: F64, k: float, coefficient: F64, degree: F64, solid: I
         index.append(nb[water])
         ds.append(-zf[solid].repeat(4)[water])
         dd.append(np.full(len(index[-1]), -1.0))
+    if len(cut) and len(cut[0]):  # the two ends of an edge a thin body lies across lose each other
+        lo, hi = cut
+        index.append(np.stack([lo, hi], axis=1).ravel())
+        ds.append(-zf.take(np.stack([hi, lo], axis=1).ravel()))
+        dd.append(np.full(2 * len(lo), -1.0))
     has_points = points is not None and len(points) > 0
     if has_points:
         g, p, w, n1, n2, w2 = pairs

@@ -10,7 +10,7 @@ import numpy as np
 from components.water_surface import WaterState, WaterSurface
 from systems.water_surface.geometry import F64, Bodies, Grid, all_of, bilinear_fields
 from systems.water_surface.outline import (AddedPoints, Sections, added_points, coupling_pairs, cross_sections,
-                                           nudge, outline_impulse, solid_vertices)
+                                           cut_edges, nudge, outline_impulse, solid_vertices, through_bodies)
 from systems.water_surface.surface import (StepReport, _disturb, _grid_step, _scratch, _slots, _solid_index,
                                            _water_mean, plane_levels)
 from systems.water_surface.waves import courant_k, free_degree, propagate
@@ -151,8 +151,10 @@ def _outline_step(state, cfg, grid, bodies, sections, levels, plane_y, k, report
         unique = state.solid.ravel().nonzero()[0]
     state.solid_index = (state.solid, unique)
     pairs = coupling_pairs(points, state.solid, grid, solid_mask=True, slots=_slots(state))
+    pairs = through_bodies(points, sections.edges, grid, pairs)
+    cut = cut_edges(points, state.solid, grid)
     new, new_points = propagate(z, zp, k, state.coefficient, state.degree, solid, pairs, heights, previous,
-                                _scratch(state), reuse=True, solid_mask=state.solid, slots=_slots(state))
+                                _scratch(state), reuse=True, solid_mask=state.solid, slots=_slots(state), cut=cut)
     # eq. 2.6 / 2.7: a displacement of the point (its height history moves with it, so no velocity is injected)
     new_points += change
     heights = heights + change

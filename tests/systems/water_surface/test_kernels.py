@@ -1,7 +1,8 @@
 """The compiled water step (systems/water_surface/kernels.py) gives the same bits as the numpy step it replaced
 (numpy_reference.py, a frozen copy) and as the numpy functions of outline.py / waves.py: gliding, turning and
 bobbing boxes, spheres, many bodies (the summation order numpy used for more than 3 bodies, the sparse
-neighbour search past 96 added points), box corners exactly on the plane, polygon vertices on grid lines."""
+neighbour search past 96 added points), box corners exactly on the plane, polygon vertices on grid lines, a plank
+thinner than h (grid edges and coupling pairs across it cut)."""
 
 from __future__ import annotations
 
@@ -10,8 +11,8 @@ import pytest
 
 from systems.water_surface import kernels as K
 from systems.water_surface.geometry import Bodies
-from systems.water_surface.outline import (added_points, coupling_pairs, cross_sections, nudge, outline_impulse,
-                                           solid_vertices)
+from systems.water_surface.outline import (added_points, coupling_pairs, cross_sections, cut_edges, nudge,
+                                           outline_impulse, solid_vertices, through_bodies)
 from systems.water_surface.surface import step_water
 from systems.water_surface.waves import free_degree, propagate
 from tests.systems.water_surface import numpy_reference as reference
@@ -47,7 +48,12 @@ def _on_lines(t: int) -> Bodies:
     return box(0.0, 0.0, half=(0.8, 0.3 if t < 10 else 0.5, 1.2), y=0.3 if t < 10 else 0.2, yaw=0.0 if t < 20 else 45.0)
 
 
-SCENES = {"gliding box": _gliding, "sphere": _sphere, "many bodies": _many, "on grid lines": _on_lines}
+def _plank(t: int) -> Bodies:  # thinner than h: grid edges across it and pairs through it are cut
+    return box(-2.0 + 0.05 * t, 0.3, half=(0.06, 0.5, 2.0), yaw=25.0 + t, y=0.05 * np.sin(t / 4.0))
+
+
+SCENES = {"gliding box": _gliding, "sphere": _sphere, "many bodies": _many, "on grid lines": _on_lines,
+          "thin plank": _plank}
 
 
 def _states(seed: int, flat: bool):
@@ -150,10 +156,18 @@ def test_outline_kernels_are_the_numpy_functions(name):
     np.testing.assert_array_equal(k_owner, owner)
     mask, unique = K.solid_mask(k_solid, grid.nz, grid.nx)
     np.testing.assert_array_equal(unique, mask.ravel().nonzero()[0])
-    g, p, w, a, b, w2 = coupling_pairs(points, mask, grid, solid_mask=True)
-    for got, want in zip(K.grid_pairs(uv, mask, grid.nx, grid.nz) + K.point_pairs(uv, grid.nx, grid.nz),
-                         (g, p, w, a, b, w2)):
+    pairs = coupling_pairs(points, mask, grid, solid_mask=True)
+    k_pairs = K.grid_pairs(uv, mask, grid.nx, grid.nz) + K.point_pairs(uv, grid.nx, grid.nz)
+    for got, want in zip(k_pairs, pairs):
         np.testing.assert_array_equal(got, want)
+    kept = through_bodies(points, shrunk.edges, grid, pairs)
+    for got, want in zip(K.through_bodies(after_table, uv, body, *k_pairs, grid.nx), kept):
+        np.testing.assert_array_equal(got, want)
+    cut = cut_edges(points, mask, grid)
+    for got, want in zip(K.cut_edges(uv, kind, mask, grid.nx, grid.nz), cut):
+        np.testing.assert_array_equal(got, want)
+    if name == "thin plank":  # both ran on something: edges across it, pairs through it
+        assert len(cut[0]) > 0 and len(kept[0]) < len(pairs[0]) and len(kept[3]) < len(pairs[3])
 
 
 def test_wave_bodies_matches_numpy_bits():
