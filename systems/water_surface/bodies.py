@@ -6,7 +6,7 @@ columns through it (8 rings at Gauss–Legendre nodes of the disc's area × 8 an
 looks the same turned). A sample of volume dV at p, in water of surface height η(x, z), is submerged by the
 fraction f = clamp((η − p_y)/s + 1/2, 0, 1), s its vertical thickness (a box's slab; a column's chord), which
 makes the submerged volume exact for an upright box and, to 0.2 mm of draft for a radius of 0.5 m, for a
-sphere (81 lattice points were 1.6–1.9 cm off). It feels the pressure force ρ·g·f·dV·(−∂η/∂x, 1, −∂η/∂z)
+sphere (81 lattice points were 1.6–2.8 cm off). It feels the pressure force ρ·g·f·dV·(−∂η/∂x, 1, −∂η/∂z)
 (Archimedes on a sloping surface: the horizontal part is the pressure gradient −ρ·g·∇η, so waves push bodies)
 at p; the sum acts at the centre of buoyancy, so boxes bob and tilt back upright. Pressure on a sphere acts
 through its centre: its buoyancy has no torque. Drag (implicit, so any drag is stable) slows the body relative
@@ -80,20 +80,18 @@ _SAMPLES = max(len(_BOX_SAMPLES), len(_SPHERE_SAMPLES))
 _CORNERS = np.array([[sx, sy, sz] for sx in (-1.0, 1.0) for sy in (-1.0, 1.0) for sz in (-1.0, 1.0)])
 
 
-def _padded(samples: F64) -> tuple[F64, F64]:
-    """Body-frame samples as (3, S) (coordinate-major, padded to the larger lattice) and their shares of the
-    volume (S,) (0 on the padding)."""
+def _padded(samples: F64, share: F64) -> tuple[F64, F64]:
+    """Samples as (3, S) (coordinate-major, padded to the larger set) and their shares of the volume (S,) (0 on
+    the padding)."""
     table = np.zeros((3, _SAMPLES))
     table[:, :len(samples)] = samples.T
-    share = np.zeros(_SAMPLES)
-    share[:len(samples)] = 1.0 / len(samples)
-    return table, share
+    padded = np.zeros(_SAMPLES)
+    padded[:len(samples)] = share
+    return table, padded
 
 
-_BOX_TABLE, _BOX_SHARE = _padded(_BOX_SAMPLES)
-_SPHERE_TABLE, _ = _padded(_SPHERE_SAMPLES)
-_SPHERE_SHARE = np.zeros(_SAMPLES)
-_SPHERE_SHARE[:len(_SPHERE_SAMPLES)] = _SPHERE_COLUMN_SHARE
+_BOX_TABLE, _BOX_SHARE = _padded(_BOX_SAMPLES, 1.0 / len(_BOX_SAMPLES))
+_SPHERE_TABLE, _SPHERE_SHARE = _padded(_SPHERE_SAMPLES, _SPHERE_COLUMN_SHARE)
 _SPHERE_THICKNESS = np.ones(_SAMPLES)  # chords in units of radius (1 on padding, which holds no volume)
 _SPHERE_THICKNESS[:len(_SPHERE_SAMPLES)] = _SPHERE_CHORDS
 

@@ -301,7 +301,8 @@ def bodies_in_water(z, solid, solid_flat, need_volume, shapes, half, radius, pos
                     depth, signs, plane_margin, plane_cells):
     """The start of a step (``surface.step_water``): the water's mean level (the volume to keep) when
     ``need_volume``, the bodies near the water (:func:`near_bodies`) and their plane levels S'_z − y0
-    (:func:`plane_levels`, windows grown by ``surface.plane_margin``), and each body's box corners in its own frame, ``signs`` (3, 8) × half extents.
+    (:func:`plane_levels`, windows grown by ``surface.plane_margin``), and each body's box corners in its own
+    frame, ``signs`` (3, 8) × half extents.
     Returns (volume, number near N, number of fallback windows, floats, flags): floats holds the local corners
     (B, 3, 8) then the levels of the near bodies (N), flags (int8) the near mask (B) then the fallback mask (N)
     (two buffers instead of four arrays: each array handed back to Python costs about a microsecond)."""

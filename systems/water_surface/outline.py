@@ -624,10 +624,10 @@ def cut_edges(points: AddedPoints, solid: np.ndarray, grid: Grid) -> tuple[I64, 
     along_v = kind[on_line] == 0  # on a line u = i: the edge from (i, floor v) to (i, floor v + 1)
     i = np.where(along_v, np.rint(u), np.floor(u)).astype(np.int64)
     j = np.where(along_v, np.floor(v), np.rint(v)).astype(np.int64)
-    step = np.where(along_v, grid.nx, 1)
-    ok = (i >= 0) & (j >= 0) & (i + ~along_v < grid.nx) & (j + along_v < grid.nz)
+    along_u = ~along_v
+    ok = (i >= 0) & (j >= 0) & (i + along_u < grid.nx) & (j + along_v < grid.nz)  # both ends on the grid
     lo = j * grid.nx + i
-    hi = lo + step
+    hi = lo + np.where(along_v, grid.nx, 1)
     flat = solid.ravel()
     ok[ok] = ~flat[lo[ok]] & ~flat[hi[ok]]
     key = np.unique(2 * lo[ok] + along_v[ok])
