@@ -126,10 +126,10 @@ class FieldGpu:
         self.cfg, self.state, self.data = cfg, state, data
         # shader variants, compiled on first use: llvmpipe runs both sides of every branch, so the debug view,
         # fog and view blending are compiled in only where they are used (see _program)
-        self._programs: dict[tuple[str, bool, bool], moderngl.Program] = {}
+        self._programs: dict[tuple[str, bool, bool, bool], moderngl.Program] = {}
         self._vaos: dict[tuple, moderngl.VertexArray] = {}
         self.plant_prog = self._program("plant")
-        self.impostor_prog = self._program("impostor")
+        self.band_bake_prog = self._program("impostor", band_distance=True)
         self.band_prog = self._program("band")
         placed = data.placed
         ctx = self.ctx
@@ -170,6 +170,9 @@ class FieldGpu:
         self.band_entries: OrderedDict[tuple[int, int], _BandEntry] = OrderedDict()
         self.band_layout: AtlasLayout | None = None
         self.band_tex: moderngl.Texture | None = None
+        # each band texel's distance from the eye that captured it (r32f; 0 where no grass, filtered like the
+        # colour): the band is fogged per texel at the distance of its grass
+        self.band_distance: moderngl.Texture | None = None
         self.band_fbo: moderngl.Framebuffer | None = None
         self.band_depth: moderngl.Renderbuffer | None = None
         self.band_bakes = 0  # viewer cells whose 12 images were captured
@@ -182,14 +185,16 @@ class FieldGpu:
         self._released = False
 
     # ------------------------------------------------------------------------------ programs, arrays
-    def _program(self, name: str, *, debug: bool = False, fog: bool = False) -> moderngl.Program:
+    def _program(self, name: str, *, debug: bool = False, fog: bool = False,
+                 band_distance: bool = False) -> moderngl.Program:
         """``name.vert`` + ``name.frag`` compiled with the defines DEBUG_LEVELS (the debug view), FOG (the view
-        has fog) and, for the level-4 rectangles, BLEND_VIEWS (``blend_views``); shared through the renderer."""
-        key = (name, debug, fog)
+        has fog), BAND_DISTANCE (the band's capture: the level-4 rectangles also write their distance from the
+        eye) and, for the level-4 rectangles, BLEND_VIEWS (``blend_views``); shared through the renderer."""
+        key = (name, debug, fog, band_distance)
         prog = self._programs.get(key)
         if prog is not None:
             return prog
-        defines = tuple(d for d, on in (("DEBUG_LEVELS", debug), ("FOG", fog),
+        defines = tuple(d for d, on in (("DEBUG_LEVELS", debug), ("FOG", fog), ("BAND_DISTANCE", band_distance),
                                         ("BLEND_VIEWS", name == "impostor" and self.cfg.blend_views)) if on)
         try:
             prog = self.renderer.program(_with_defines(shader_source(SHADERS / f"{name}.vert"), defines),
@@ -465,9 +470,9 @@ class FieldGpu:
         two views of different sizes do not make it thrash."""
         if self.band_tex is None or self._band_tile_width(camera) <= 1.5 * self.band_layout.tile_w:
             return
-        for obj in (self.band_tex, self.band_fbo, self.band_depth):
+        for obj in (self.band_tex, self.band_distance, self.band_fbo, self.band_depth):
             obj.release()
-        self.band_tex = self.band_fbo = self.band_depth = None
+        self.band_tex = self.band_distance = self.band_fbo = self.band_depth = None
         self.band_entries.clear()
 
     def _band_atlas(self, camera: CameraInput, height_ratio: float) -> None:
@@ -481,8 +486,12 @@ class FieldGpu:
         self.band_tex = self.ctx.texture(self.band_layout.size, 4)
         self.band_tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
         self.band_tex.repeat_x = self.band_tex.repeat_y = False
+        self.band_distance = self.ctx.texture(self.band_layout.size, 1, dtype="f4")
+        self.band_distance.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        self.band_distance.repeat_x = self.band_distance.repeat_y = False
         self.band_depth = self.ctx.depth_renderbuffer(self.band_layout.size)
-        self.band_fbo = self.ctx.framebuffer(color_attachments=[self.band_tex], depth_attachment=self.band_depth)
+        self.band_fbo = self.ctx.framebuffer(color_attachments=[self.band_tex, self.band_distance],
+                                             depth_attachment=self.band_depth)
         self.band_fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
 
     def _bake_band(self, key: tuple[int, int, float], camera: CameraInput) -> _BandEntry:
@@ -531,7 +540,7 @@ class FieldGpu:
         fbo.use()
         self.ctx.enable(moderngl.DEPTH_TEST)
         self.ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
-        prog = self.impostor_prog
+        prog = self.band_bake_prog
         set_uniforms(prog, **self._lighting(None))
         vao = self._vao(prog, ("impostor",))
         self.atlas.use(0)
@@ -598,10 +607,10 @@ class FieldGpu:
         # uploads first: writing a buffer that the frame's pending draws use would make the driver wait
         rectangles = self._impostor_instances(plan.impostor_cells, plan.impostor_face, plan.impostor_views,
                                               plan.impostor_blend, 4)
-        band_vertices = 0
+        band_vertices, band = 0, None
         if plan.band_cell is not None and plan.band_sides.any():
-            entry = self.band_entries[self._band_key(plan.band_cell, camera, viewer, plan.band_apothem)]
-            band_vertices = self._band_quads(entry, plan.band_sides & entry.content)
+            band = self.band_entries[self._band_key(plan.band_cell, camera, viewer, plan.band_apothem)]
+            band_vertices = self._band_quads(band, plan.band_sides & band.content)
         # levels 0-3: one plant list (each level's plants nearest first, for early depth rejection), one draw
         # per level and primitive type
         counts = [len(p) for p in plan.plants]
@@ -627,8 +636,9 @@ class FieldGpu:
         # level 5
         if band_vertices:
             prog = self._program("band", debug=debug, fog=fog)
-            set_uniforms(prog, **lighting, band_tex=0)
+            set_uniforms(prog, **lighting, band_tex=0, band_distance=1, band_eye=tuple(float(x) for x in band.eye))
             self.band_tex.use(0)
+            self.band_distance.use(1)
             self._vao(prog, ("band",)).render(moderngl.TRIANGLES, vertices=band_vertices)
             self.draw_calls += 1
 
@@ -637,7 +647,7 @@ class FieldGpu:
             return
         self._released = True
         objects = [self.instance_buf, self.command_buf, self.impostor_buf, self.bounds_tex, self.band_buf, self.atlas,
-                   self.band_tex, self.band_fbo, self.band_depth]
+                   self.band_tex, self.band_distance, self.band_fbo, self.band_depth]
         objects += list(self._vaos.values())  # the programs belong to the renderer (shared between fields)
         objects += list(self.mesh_vbo.values()) + list(self.mesh_ibo.values())
         for obj in objects:

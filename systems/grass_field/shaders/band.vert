@@ -5,9 +5,13 @@ uniform mat4 view_proj;
 in vec3 in_position;
 in vec2 in_uv;
 out vec2 v_uv;
-out float v_fog;  // fog factor (lit.glsl's fog) per corner: the band's sides lie at nearly one distance
+#ifdef FOG
+out vec3 v_position;  // the band's point: the ray from the capturing eye through it reaches the grass drawn there
+#endif
 void main() {
     v_uv = in_uv;
-    v_fog = clamp(1.0 - exp(-length(camera_pos - in_position) * fog_density), 0.0, 1.0);
+#ifdef FOG
+    v_position = in_position;
+#endif
     gl_Position = view_proj * vec4(in_position, 1.0);
 }

@@ -2,7 +2,8 @@
 #include "lit.glsl"
 #include "common.glsl"
 // Cached images are premultiplied (transparent background); alpha-tested with coverage-preserving mipmaps.
-// Variants (render.py): BLEND_VIEWS (cross-fade the two nearest views), DEBUG_LEVELS, FOG.
+// Variants (render.py): BLEND_VIEWS (cross-fade the two nearest views), DEBUG_LEVELS, FOG, BAND_DISTANCE (the
+// band's capture: each texel's distance from the capturing eye into a second target, for band.frag's fog).
 uniform sampler2D atlas_tex;
 in vec2 v_uv_a;
 in vec2 v_uv_b;
@@ -10,6 +11,11 @@ in float v_blend;
 in float v_fog;
 flat in int v_level;
 out vec4 frag;
+#ifdef BAND_DISTANCE
+uniform vec3 eye;
+in vec3 v_world;
+layout(location = 1) out float frag_distance;
+#endif
 void main() {
     vec4 c = texture(atlas_tex, v_uv_a);
 #ifdef BLEND_VIEWS
@@ -24,4 +30,7 @@ void main() {
     col = mix(col, sky_horizon, v_fog);
 #endif
     frag = vec4(col, 1.0);
+#ifdef BAND_DISTANCE
+    frag_distance = length(v_world - eye);
+#endif
 }

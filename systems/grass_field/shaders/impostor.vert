@@ -23,6 +23,9 @@ out vec2 v_uv_b;
 out float v_blend;
 out float v_fog;        // fog factor (lit.glsl's fog) per corner: a rectangle spans little of the fog's range
 flat out int v_level;
+#ifdef BAND_DISTANCE
+out vec3 v_world;       // the rectangle's point where the cell stands (before the scaling about the eye)
+#endif
 vec2 tile_uv(float tile, vec2 local) {
     int t = int(tile + 0.5);
     int cols = int(atlas.x + 0.5);
@@ -41,6 +44,9 @@ void main() {
     impostor_basis(i_face, elevation, right, up, normal);
     vec3 world = i_centre + ((corner.x * 2.0 - 1.0) * frame.x) * right + mix(frame.y, frame.z, corner.y) * up;
     v_fog = clamp(1.0 - exp(-length(camera_pos - world) * fog_density), 0.0, 1.0);
+#ifdef BAND_DISTANCE
+    v_world = world;
+#endif
     if (ortho == 0) {
         float d = length(i_centre - eye);
         world = eye + (world - eye) * max(0.05, (d - frame.w) / max(d, 1e-4));

@@ -96,6 +96,36 @@ def test_band_is_baked_and_drawn_beyond_the_distance(tmp_path):
         app.renderer = None
 
 
+def _clarity_by_depth(tmp_path, grass: str, camera: str, name: str) -> np.ndarray:
+    """How much of the grass's own colour survives the fog (1 clear, 0 all fog) in the far, middle and near
+    thirds of the rows the grass covers: the frame rendered without fog, with the scene's fog and with a fog
+    so dense that every grass pixel is the horizon colour, compared per pixel after the tone map."""
+    frames = []
+    for density in (0.0, 0.0005, 1.0):
+        text = scene_text(grass, camera, terrain=False).replace("fog_density = 0.0005", f"fog_density = {density}")
+        app = App(write_scene(tmp_path, text, f"{name}_{density}.toml"))
+        frames.append(np.asarray(render_app(app, 160, 120), np.float64))
+    clear, fogged, horizon = frames
+    covered = np.abs(clear - horizon).max(axis=2) > 40
+    clarity = np.linalg.norm(fogged - horizon, axis=2) / np.maximum(np.linalg.norm(clear - horizon, axis=2), 1e-9)
+    rows = np.flatnonzero(covered.any(axis=1))
+    thirds = np.array_split(np.arange(rows[0], rows[-1] + 1), 3)
+    return np.array([clarity[t][covered[t]].mean() for t in thirds])
+
+
+def test_the_band_is_fogged_at_the_distance_of_its_grass(tmp_path):
+    """Only cells beyond the merge distance grow grass (the rest is bare), seen from 400 up: far grass shows
+    higher in the picture.  The band's images are fogged per texel at their grass's distance, as the same cells
+    drawn as level-4 rectangles where they stand (fog per corner); fogging the band at its own distance (800)
+    made far grass as clear as near grass (clarity 0.29 in every third, the rectangles 0.10 to 0.22)."""
+    grass = SMALL + "grid_x = 40\ngrid_z = 40\nbare_areas = [[-850.0, -850.0, 850.0, 850.0]]\n"
+    camera = _camera((0.0, 400.0, 0.0), pitch=-18.0, far=5000.0)
+    band = _clarity_by_depth(tmp_path, grass, camera, "band")
+    rectangles = _clarity_by_depth(tmp_path, grass + "max_level = 4\n", camera, "rectangles")
+    assert rectangles[0] < rectangles[2] - 0.08  # the reference: far thirds foggier
+    assert np.abs(band - rectangles).max() < 0.03, (band, rectangles)
+
+
 def test_bands_are_prefetched_ahead_of_the_viewer_and_the_height_step_has_hysteresis(tmp_path):
     from dataclasses import replace
 
