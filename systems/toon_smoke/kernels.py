@@ -498,3 +498,305 @@ def residual_kernel(x, b, diag, inactive, sx, sy, coefficients, weighted, start,
     for t in range(n):
         v = b[t] - (diag[t] * xs[t] - r[t])
         r[t] = np.float32(0.0) if inactive[t] else v
+
+
+# --- The whole MGPCG solve in one call (McAdams et al. 2010; seeds/002 §3.1) --------------------------------------
+#
+# The numpy reference (:func:`systems.toon_smoke.poisson.solve_numpy`) runs conjugate gradients as some thirty
+# numpy and compiled calls per iteration (the operator, two dot products, max|r|, the V-cycle's kernels per level
+# and its dense coarse solve, the zero-mean projection, the vector updates): on a 16³ grid the calls cost more
+# than the arithmetic.  :func:`mgpcg_kernel` runs the same loop, from the initial residual to the report, with the
+# same float32 operations in the same order (the smoothers, residual and restriction above, called per level) and
+# numpy's float64 reductions written out: a contiguous ``sum`` is numpy's pairwise summation
+# (:func:`_pairwise_sum`), and a float32 array summed with ``dtype=np.float64`` is cast in buffers of
+# ``np.getbufsize()`` elements, each buffer summed pairwise and added to a running total that starts at +0.
+
+
+@kernel(inline="always")
+def _pairwise_block(values, start, n):  # pragma: no cover
+    """numpy's sum of a run of at most 128 float64 values (see :func:`_pairwise_sum`)."""
+    if n < 8:
+        total = -0.0
+        for t in range(start, start + n):
+            total += values[t]
+        return total
+    r0, r1, r2, r3 = values[start], values[start + 1], values[start + 2], values[start + 3]
+    r4, r5, r6, r7 = values[start + 4], values[start + 5], values[start + 6], values[start + 7]
+    blocks = start + n - n % 8
+    for t in range(start + 8, blocks, 8):
+        r0 += values[t]
+        r1 += values[t + 1]
+        r2 += values[t + 2]
+        r3 += values[t + 3]
+        r4 += values[t + 4]
+        r5 += values[t + 5]
+        r6 += values[t + 6]
+        r7 += values[t + 7]
+    total = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    for t in range(blocks, start + n):
+        total += values[t]
+    return total
+
+
+@kernel
+def _pairwise_sum(values, start, n):  # pragma: no cover
+    """Σ values[start:start + n] (float64) as numpy sums a contiguous run (``pairwise_sum`` of
+    numpy/_core/src/umath/loops_utils.h.src): fewer than 8 terms left to right from −0; up to 128 in eight
+    interleaved partial sums, combined ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7)), then the remainder
+    left to right; a longer run is split at half its length rounded down to a multiple of 8 and the two halves'
+    sums added.  numpy recurses; here the same tree is walked depth first with a stack of the runs being summed
+    (a recursive kernel crashed the cached kernels that call it, numba 0.68)."""
+    if n <= 128:
+        return _pairwise_block(values, start, n)
+    lo = np.empty(64, np.int64)  # the runs from the whole one down to the current one (halving: 64 is ample)
+    size = np.empty(64, np.int64)
+    left = np.empty(64)  # a run's left half's sum, once known
+    has_left = np.zeros(64, np.bool_)
+    depth = 0
+    lo[0], size[0] = start, n
+    while True:
+        if size[depth] > 128:  # descend into the left half
+            half = size[depth] // 2
+            half -= half % 8
+            lo[depth + 1], size[depth + 1], has_left[depth + 1] = lo[depth], half, False
+            depth += 1
+            continue
+        total = _pairwise_block(values, lo[depth], size[depth])
+        depth -= 1
+        while has_left[depth]:  # a right half: its run is complete, hand the sum up
+            total = left[depth] + total
+            if depth == 0:
+                return total
+            depth -= 1
+        left[depth], has_left[depth] = total, True  # a left half: go on with the right one
+        half = size[depth] // 2
+        half -= half % 8
+        lo[depth + 1], size[depth + 1], has_left[depth + 1] = lo[depth] + half, size[depth] - half, False
+        depth += 1
+
+
+@kernel
+def _dot(a, b, products):  # pragma: no cover
+    """Σ a·b in float64 as ``np.multiply(a, b, dtype=np.float64).sum()``: exact products of the float32 values,
+    summed pairwise onto +0 (``poisson._dot``)."""
+    n = a.shape[0]
+    for t in range(n):
+        products[t] = np.float64(a[t]) * np.float64(b[t])
+    return 0.0 + _pairwise_sum(products, 0, n)
+
+
+@kernel(inline="always")
+def _max_abs(a):  # pragma: no cover
+    """max |a| (float32) as ``np.abs(a).max()``; a NaN wins, as in numpy."""
+    top = np.float32(0.0)
+    for t in range(a.shape[0]):
+        v = abs(a[t])
+        if v > top or v != v:
+            top = v
+    return top
+
+
+@kernel
+def _sum_active(x, active, values, buffer_size):  # pragma: no cover
+    """Σ x over the active cells in float64, and their count, as ``x[active].sum(dtype=np.float64)``: the active
+    values gathered in order into ``values``, then, as numpy sums a float32 array into float64, cast a buffer of
+    ``buffer_size`` at a time, each buffer summed pairwise and added to a total that starts at +0."""
+    count = 0
+    for c in range(x.shape[0]):
+        if active[c]:
+            values[count] = np.float64(x[c])
+            count += 1
+    total = 0.0
+    for lo in range(0, count, buffer_size):
+        total += _pairwise_sum(values, lo, min(buffer_size, count - lo))
+    return total, count
+
+
+@kernel
+def _remove_mean(x, active, values, buffer_size):  # pragma: no cover
+    """x −= the mean over the active cells (``poisson._remove_mean``): the float64 sum (:func:`_sum_active`)
+    divided by the count, rounded to float32, subtracted from each active value."""
+    total, count = _sum_active(x, active, values, buffer_size)
+    if count == 0:
+        return
+    mean = np.float32(total / count)
+    for c in range(x.shape[0]):
+        if active[c]:
+            x[c] = x[c] - mean
+
+
+@kernel
+def _vectors(levels, d):  # pragma: no cover
+    """Level ``d``'s padded flat x, b and r (views into the packed vectors, ``poisson._PackedLevels``) and its
+    padded shape."""
+    table, vectors = levels[0], levels[1]
+    offset, shape = table[d, 0], (table[d, 1], table[d, 2], table[d, 3])
+    end = offset + shape[0] * shape[1] * shape[2]
+    return vectors[0, offset:end], vectors[1, offset:end], vectors[2, offset:end], shape
+
+
+@kernel
+def _span(levels, d):  # pragma: no cover
+    """Level ``d``'s arrays over its span (views into the packed arrays): the scratch s, the diagonal, the red and
+    black scales, keep_red, keep_black, the inactive flags, the parent indices and the neighbour coefficients
+    (6, span; (6, 0) when the level is not weighted); then sx, sy (the span starts at sx) and whether it is
+    weighted."""
+    table, _, scratch, stencil, inactive, parents, coefficients = levels[:7]
+    sx, sy = table[d, 2] * table[d, 3], table[d, 3]
+    n = table[d, 1] * sx - 2 * sx
+    lo, hi, weighted = table[d, 4], table[d, 4] + n, table[d, 6] != 0
+    first = table[d, 5]
+    c = coefficients[first:first + 6 * n if weighted else first].reshape((6, n if weighted else 0))
+    return (scratch[lo:hi], stencil[0, lo:hi], stencil[1, lo:hi], stencil[2, lo:hi], stencil[3, lo:hi],
+            stencil[4, lo:hi], inactive[lo:hi], parents[lo:hi], c, sx, sy, weighted)
+
+
+@kernel(inline="always")
+def _scatter(compact, padded, shape, padded_shape):  # pragma: no cover
+    """A compact field (C order over ``shape``) into the real cells of a padded flat vector (ghosts untouched)."""
+    py, pz, nz = padded_shape[1], padded_shape[2], shape[2]
+    for i in range(shape[0]):
+        for j in range(shape[1]):
+            row, c = ((i + 1) * py + (j + 1)) * pz + 1, (i * shape[1] + j) * nz
+            source, target = compact[c:c + nz], padded[row:row + nz]
+            for k in range(nz):  # views indexed by the loop counter: 3x faster than a slice assignment
+                target[k] = source[k]
+
+
+@kernel(inline="always")
+def _gather(padded, compact, shape, padded_shape):  # pragma: no cover
+    """The real cells of a padded flat vector into a compact field (C order over ``shape``)."""
+    py, pz, nz = padded_shape[1], padded_shape[2], shape[2]
+    for i in range(shape[0]):
+        for j in range(shape[1]):
+            row, c = ((i + 1) * py + (j + 1)) * pz + 1, (i * shape[1] + j) * nz
+            source, target = padded[row:row + nz], compact[c:c + nz]
+            for k in range(nz):
+                target[k] = source[k]
+
+
+@kernel
+def _apply_operator(levels, phi, shape, out):  # pragma: no cover
+    """M φ on the fine level (``poisson.apply_operator``): φ into the level's padded x, then over the span
+    diag·φ − Σ A φ_nb (0 on the inactive cells of an unweighted level) into its r, whose real cells go to the
+    compact ``out``."""
+    x, _, r, padded_shape = _vectors(levels, 0)
+    s, diag, _, _, _, _, inactive, _, coefficients, sx, sy, weighted = _span(levels, 0)
+    _scatter(phi, x, shape, padded_shape)
+    _neighbour_sums(x, sx, sy, coefficients, weighted, sx, s)
+    n = s.shape[0]
+    xs, rs = x[sx:sx + n], r[sx:sx + n]
+    for t in range(n):
+        v = diag[t] * xs[t] - s[t]
+        rs[t] = np.float32(0.0) if (inactive[t] and not weighted) else v
+    _gather(r, out, shape, padded_shape)
+
+
+@kernel
+def _v_cycle(levels, rhs, shape, products, sweeps, out):  # pragma: no cover
+    """One V-cycle from the compact ``rhs`` into the compact ``out`` (``poisson.v_cycle``): level by level down,
+    pre-smoothing, the residual and its restriction; the dense solve on the coarsest (each row's products summed
+    pairwise onto +0, as numpy's ``sum(axis=1)`` of a C-ordered matrix); level by level up, the prolongation and
+    post-smoothing."""
+    count, dense_inverse, dense_cells = levels[0].shape[0], levels[7], levels[8]
+    _, b, _, padded_shape = _vectors(levels, 0)
+    _scatter(rhs, b, shape, padded_shape)
+    for d in range(count - 1):  # loop over the levels, down
+        x, b, r, padded_shape = _vectors(levels, d)
+        s, diag, red, black, keep_red, keep_black, inactive, _, coefficients, sx, sy, weighted = _span(levels, d)
+        n = s.shape[0]
+        pre_smooth_kernel(x, b[sx:sx + n], red, black, keep_red, keep_black, sx, sy, coefficients, weighted, sx, s,
+                          sweeps)
+        residual_kernel(x, b[sx:sx + n], diag, inactive, sx, sy, coefficients, weighted, sx, r[sx:sx + n])
+        _, coarse_b, _, coarse_shape = _vectors(levels, d + 1)
+        restrict_kernel(r.reshape(padded_shape)[1:-1, 1:-1, 1:-1], coarse_b.reshape(coarse_shape)[1:-1, 1:-1, 1:-1])
+    x, b = _vectors(levels, count - 1)[:2]
+    m = dense_cells.shape[0]
+    coarse_b = np.empty(m)
+    for j in range(m):
+        coarse_b[j] = b[dense_cells[j]]
+    for i in range(m):
+        for j in range(m):
+            products[j] = dense_inverse[i, j] * coarse_b[j]
+        x[dense_cells[i]] = np.float32(0.0 + _pairwise_sum(products, 0, m))
+    for d in range(count - 2, -1, -1):  # loop over the levels, up
+        x, b = _vectors(levels, d)[:2]
+        s, _, red, black, keep_red, keep_black, inactive, parent, coefficients, sx, sy, weighted = _span(levels, d)
+        n = s.shape[0]
+        post_smooth_kernel(x, b[sx:sx + n], red, black, keep_red, keep_black, sx, sy, coefficients, weighted, sx, s,
+                           sweeps, _vectors(levels, d + 1)[0], parent, inactive)
+    x, _, _, padded_shape = _vectors(levels, 0)
+    _gather(x, out, shape, padded_shape)
+
+
+@kernel
+def mgpcg_kernel(b, x0, warm, active, singular, tolerance, max_iterations, buffer_size, table, vectors, scratch,
+                 stencil, inactive, parents, coefficients, dense_inverse, dense_cells, sweeps):  # pragma: no cover
+    """Multigrid-preconditioned conjugate gradients for M φ = b until max|r| ≤ tolerance · max|b|
+    (``poisson.solve_numpy``: the same operations in the same order, so the same bits).
+
+    ``b``, ``x0`` and ``active`` are the fine level's (nx, ny, nz) fields (``x0`` is read only when ``warm``);
+    ``table`` … ``dense_cells`` the levels packed end to end (``poisson._PackedLevels``), whose x, b, r and scratch
+    are overwritten; ``buffer_size`` numpy's (``np.getbufsize()``).  Returns (φ (nx, ny, nz) float32, iterations,
+    max|r| at exit, max|b|).
+    """
+    levels = (table, vectors, scratch, stencil, inactive, parents, coefficients, dense_inverse, dense_cells)
+    shape = b.shape
+    n = shape[0] * shape[1] * shape[2]
+    on = np.empty(n, np.bool_)
+    rhs = np.empty(n, np.float32)
+    x = np.zeros(n, np.float32)
+    nz, zero = shape[2], np.float32(0.0)
+    for i in range(shape[0]):
+        for j in range(shape[1]):
+            c = (i * shape[1] + j) * nz
+            row_on, row_rhs, row_x, row_active, row_b, row_x0 = (on[c:c + nz], rhs[c:c + nz], x[c:c + nz],
+                                                                 active[i, j], b[i, j], x0[i, j])
+            for k in range(nz):
+                row_on[k] = row_active[k]
+                row_rhs[k] = np.float32(row_b[k]) if row_active[k] else zero
+            if warm:
+                for k in range(nz):
+                    row_x[k] = np.float32(row_x0[k]) if row_active[k] else zero
+    products = np.empty(max(n, dense_cells.shape[0]), np.float64)
+    if singular:
+        _remove_mean(rhs, on, products, buffer_size)
+    b_max = np.float64(_max_abs(rhs))
+    r = np.empty(n, np.float32)
+    ap = np.empty(n, np.float32)
+    z = np.empty(n, np.float32)
+    _apply_operator(levels, x, shape, ap)
+    for c in range(n):
+        r[c] = rhs[c] - ap[c] if on[c] else np.float32(0.0)
+    threshold = tolerance * b_max
+    res = np.float64(_max_abs(r))
+    iterations = 0
+    if res <= threshold or b_max == 0.0:
+        return x.reshape(shape), iterations, res, b_max
+    _v_cycle(levels, r, shape, products, sweeps, z)
+    if singular:
+        _remove_mean(z, on, products, buffer_size)
+    p = z.copy()
+    rz = _dot(r, z, products)
+    while iterations < max_iterations:
+        iterations += 1
+        _apply_operator(levels, p, shape, ap)
+        p_ap = _dot(p, ap, products)
+        if p_ap <= 0.0:
+            break
+        alpha = np.float32(rz / p_ap)
+        for c in range(n):
+            x[c] = x[c] + alpha * p[c]
+            r[c] = r[c] - alpha * ap[c]
+        res = np.float64(_max_abs(r))
+        if res <= threshold:
+            break
+        _v_cycle(levels, r, shape, products, sweeps, z)
+        if singular:
+            _remove_mean(z, on, products, buffer_size)
+        rz_new = _dot(r, z, products)
+        beta = np.float32(rz_new / rz)
+        for c in range(n):
+            p[c] = p[c] * beta + z[c]
+        rz = rz_new
+    return x.reshape(shape), iterations, res, b_max

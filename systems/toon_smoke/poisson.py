@@ -14,6 +14,11 @@ McAdams, Sifakis & Teran, "A parallel multigrid Poisson solver for fluids simula
 
 All arrays are indexed [x, y, z]; cell fields are float32, dot products accumulate in float64 (pairwise sums, no
 BLAS, so a run repeats bit for bit).
+
+:func:`solve` runs the whole iteration, from the first residual to the report, in one compiled call
+(:func:`systems.toon_smoke.kernels.mgpcg_kernel`, on the levels packed end to end: :class:`_PackedLevels`).
+:func:`solve_numpy` is the same iteration as separate numpy and compiled calls, some thirty an iteration, and the
+reference it is tested against bit for bit.
 """
 
 from __future__ import annotations
@@ -28,7 +33,7 @@ from components.toon_smoke import MAX_COARSEST_CELLS, coarsest_shape
 
 F32 = NDArray[np.float32]
 
-__all__ = ["PoissonHierarchy", "SolveReport", "build_hierarchy", "solve"]
+__all__ = ["PoissonHierarchy", "SolveReport", "build_hierarchy", "solve", "solve_numpy"]
 
 _SMOOTH_SWEEPS = 2  # red-black Gauss-Seidel sweeps before and after each coarse correction
 
@@ -130,12 +135,54 @@ def _parent_index(padded_shape: tuple[int, int, int]) -> NDArray[np.intp]:
 
 
 @dataclass
+class _PackedLevels:
+    """Every level's padded flat layout (:class:`_FlatLevel`) end to end in a few arrays, for the compiled solve
+    (:func:`systems.toon_smoke.kernels.mgpcg_kernel`): one call takes these instead of a dozen arrays per level.
+    Copies of the levels' arrays, with scratch vectors of their own (the numpy solve keeps its own)."""
+
+    table: NDArray[np.int64]  # per level: offset in vectors, padded shape (3), offset in the span arrays, offset in
+    # coefficients, whether the level is weighted (its coefficients are not None)
+    vectors: F32  # (3, Σ P): each level's x, b and r (scratch)
+    scratch: F32  # (Σ span): each level's s
+    stencil: F32  # (5, Σ span): diag, red_inv_diag, black_inv_diag, keep_red, keep_black
+    inactive: NDArray[np.bool_]  # (Σ span)
+    parents: NDArray[np.intp]  # (Σ span): parent_index, into the next level's vector (0 on the coarsest level)
+    coefficients: F32  # the (6, span) coefficient matrices of the weighted levels, flattened one after another
+    dense_inverse: NDArray[np.float64]  # the coarsest level's
+    dense_cells: NDArray[np.intp]
+
+
+def _pack_levels(levels: list[Level]) -> _PackedLevels:
+    """The levels' fields concatenated level after level (see :class:`_PackedLevels`)."""
+    flats = [level.flat for level in levels]
+    sizes = [flat.x.size for flat in flats]
+    spans = [flat.s.size for flat in flats]
+    table = np.zeros((len(flats), 7), np.int64)
+    table[:, 0] = np.cumsum([0] + sizes[:-1])
+    table[:, 1:4] = [flat.padded_shape for flat in flats]
+    table[:, 4] = np.cumsum([0] + spans[:-1])
+    weighted = [flat.coefficients is not None for flat in flats]
+    table[:, 5] = np.cumsum([0] + [6 * n * w for n, w in zip(spans[:-1], weighted[:-1])])
+    table[:, 6] = weighted
+    parents = [np.zeros(n, np.intp) if flat.parent_index is None else flat.parent_index
+               for flat, n in zip(flats, spans)]
+    coefficients = [flat.coefficient_matrix.ravel() for flat in flats if flat.coefficients is not None]
+    return _PackedLevels(
+        table, np.zeros((3, sum(sizes)), np.float32), np.zeros(sum(spans), np.float32),
+        np.stack([np.concatenate([getattr(flat, name) for flat in flats])
+                  for name in ("diag", "red_inv_diag", "black_inv_diag", "keep_red", "keep_black")]),
+        np.concatenate([flat.inactive for flat in flats]), np.concatenate(parents),
+        np.concatenate([np.zeros(0, np.float32)] + coefficients), levels[-1].dense_inverse, levels[-1].dense_cells)
+
+
+@dataclass
 class PoissonHierarchy:
     """The multigrid levels for one solid mask (rebuilt when obstacles change)."""
 
     levels: list[Level] = field(default_factory=list)
     singular: bool = False  # no open boundary: M has the constants in its null space
     fluid_weight: F32 | None = None  # 1 in fluid cells, 0 in solid cells (fine level)
+    packed: _PackedLevels | None = None  # the levels for the compiled solve (:func:`solve`)
 
 
 @dataclass
@@ -275,7 +322,8 @@ def build_hierarchy(solid: NDArray[np.bool_], open_faces: tuple[bool, ...]) -> P
     level.dense_inverse = np.linalg.pinv(_dense_operator(level)) if level.active.any() else np.zeros((0, 0))
     padded_index = np.arange(level.flat.x.size).reshape(level.flat.padded_shape)[1:-1, 1:-1, 1:-1]
     level.dense_cells = padded_index[level.active]  # C order, as the rows of the dense operator
-    return PoissonHierarchy(levels, singular=not any(open_faces), fluid_weight=(~solid).astype(np.float32))
+    return PoissonHierarchy(levels, singular=not any(open_faces), fluid_weight=(~solid).astype(np.float32),
+                            packed=_pack_levels(levels))
 
 
 def _neighbour_sum(flat: _FlatLevel) -> F32:
@@ -438,8 +486,28 @@ def solve(hierarchy: PoissonHierarchy, b: F32, x0: F32 | None = None, tolerance:
     """Preconditioned conjugate gradients for M φ = b until max|r| ≤ tolerance · max|b|.
 
     ``x0`` warm-starts the iteration (last step's pressure).  In a closed domain the right-hand side and every
-    preconditioned residual are made zero-mean so the iteration stays in the range of M.
+    preconditioned residual are made zero-mean so the iteration stays in the range of M.  The whole iteration is
+    one compiled call (:func:`systems.toon_smoke.kernels.mgpcg_kernel` on the packed levels), the same bits as
+    :func:`solve_numpy`.
     """
+    from systems.toon_smoke.kernels import mgpcg_kernel
+
+    if hierarchy.packed is None:  # a hierarchy not made by build_hierarchy
+        hierarchy.packed = _pack_levels(hierarchy.levels)
+    packed = hierarchy.packed
+    x, iterations, residual, rhs = mgpcg_kernel(
+        b, b if x0 is None else x0, x0 is not None, hierarchy.levels[0].active, hierarchy.singular,
+        float(tolerance), int(max_iterations), np.getbufsize(), packed.table, packed.vectors, packed.scratch,
+        packed.stencil, packed.inactive, packed.parents, packed.coefficients, packed.dense_inverse,
+        packed.dense_cells, _SMOOTH_SWEEPS)
+    return x, SolveReport(int(iterations), float(residual), float(rhs))
+
+
+def solve_numpy(hierarchy: PoissonHierarchy, b: F32, x0: F32 | None = None, tolerance: float = 1e-4,
+                max_iterations: int = 30) -> tuple[F32, SolveReport]:
+    """:func:`solve` as separate calls (its reference): per iteration the operator, two dot products, max|r|, a
+    V-cycle (per level its compiled smoothing, residual and restriction; the dense solve), the zero-mean projection
+    and the vector updates, each a numpy or compiled call."""
     fine = hierarchy.levels[0]
     b = np.where(fine.active, b, np.float32(0.0)).astype(np.float32)
     if hierarchy.singular:

@@ -190,15 +190,109 @@ def test_compiled_smoother_matches_the_numpy_reference_bit_for_bit(monkeypatch, 
         assert any(weighted) == (radius > 0.0)  # both stencil forms are exercised
         u, v, w = _random_velocity(N, seed=3)
         b = -fluid.divergence(u, v, w, 0.1) * np.float32(0.1)
-        compiled = poisson.solve(hierarchy, b, None, 1e-6, 12)
+        compiled = poisson.solve_numpy(hierarchy, b, None, 1e-6, 12)
         with monkeypatch.context() as patch:
-            patch.setattr(poisson, "_pre_smooth", poisson._pre_smooth_numpy)
-            patch.setattr(poisson, "_post_smooth", poisson._post_smooth_numpy)
-            patch.setattr(poisson, "_restrict_into", poisson._restrict_numpy)
-            patch.setattr(poisson, "_residual", poisson._residual_numpy)
-            reference = poisson.solve(hierarchy, b, None, 1e-6, 12)
+            _numpy_v_cycle(patch)
+            reference = poisson.solve_numpy(hierarchy, b, None, 1e-6, 12)
         assert compiled[1].iterations == reference[1].iterations > 1
         assert compiled[0].tobytes() == reference[0].tobytes()
+
+
+def _numpy_v_cycle(patch) -> None:
+    """Make :func:`poisson.solve_numpy` all numpy: its V-cycle's smoothing, residual and restriction too."""
+    patch.setattr(poisson, "_pre_smooth", poisson._pre_smooth_numpy)
+    patch.setattr(poisson, "_post_smooth", poisson._post_smooth_numpy)
+    patch.setattr(poisson, "_restrict_into", poisson._restrict_numpy)
+    patch.setattr(poisson, "_residual", poisson._residual_numpy)
+
+
+def _sphere_in(shape: tuple[int, int, int], radius: float) -> np.ndarray:
+    i, j, k = np.indices(shape)
+    c = [(n - 1) / 2 for n in shape]
+    return (i - c[0]) ** 2 + (j - c[1]) ** 2 + (k - c[2]) ** 2 < radius ** 2
+
+
+_CLOSED = (False,) * 6
+_OPEN_TOP = (False, False, False, True, False, False)
+_EXPLOSION = (True, True, False, True, True, True)  # the explosion preset's open sides
+
+
+@pytest.mark.parametrize("shape, radius, open_sides, warm, tolerance, max_iterations", [
+    ((16, 16, 16), 0.0, _CLOSED, False, 1e-6, 30),  # singular, unweighted levels
+    ((16, 16, 16), 4.0, _CLOSED, False, 1e-6, 30),  # singular, an obstacle: weighted coarse levels
+    ((16, 16, 16), 4.0, _OPEN_TOP, False, 1e-6, 30),
+    ((16, 16, 16), 3.0, _EXPLOSION, True, 1e-4, 30),  # warm start, the demo puff's tolerance
+    ((12, 20, 10), 3.0, _EXPLOSION, True, 1e-6, 30),  # non-cubic, a 300-cell dense coarsest level
+    ((8, 8, 8), 2.0, _OPEN_TOP, False, 1e-6, 30),  # two levels
+    ((4, 4, 4), 0.0, _CLOSED, False, 1e-6, 30),  # one level: the dense solve alone
+    ((32, 32, 32), 6.0, _CLOSED, True, 1e-6, 30),  # dot products and means over more than one numpy buffer
+    ((16, 16, 16), 4.0, _OPEN_TOP, False, 1e-12, 3),  # stops at max_iterations
+])
+def test_compiled_solve_matches_the_numpy_solve_bit_for_bit(monkeypatch, shape, radius, open_sides, warm,
+                                                            tolerance, max_iterations):
+    """The whole MGPCG loop in one compiled call (``poisson.solve``) gives the bits of the numpy reference
+    (``poisson.solve_numpy`` with its V-cycle in numpy too): the pressure, the iteration count, the residual and
+    max|b|; closed (singular) and open boxes, obstacles, warm starts (x0 nonzero in solid cells too), one to four
+    levels, a run that hits max_iterations; then again from its own solution (0 or 1 more iterations), and b = 0
+    (the early return)."""
+    hierarchy = poisson.build_hierarchy(_sphere_in(shape, radius), open_sides)
+    assert hierarchy.singular == (open_sides == _CLOSED)
+    assert hierarchy.levels[0].active.all() == (radius == 0.0)
+    if radius >= 4.0:  # smoothed coarse levels with fractional face coefficients: the weighted stencil
+        assert any(level.flat.coefficients is not None for level in hierarchy.levels[:-1])
+    rng = np.random.default_rng(11)
+    b = rng.standard_normal(shape).astype(np.float32)
+    x0 = (0.3 * rng.standard_normal(shape)).astype(np.float32) if warm else None
+    with monkeypatch.context() as patch:
+        _numpy_v_cycle(patch)
+        reference = [poisson.solve_numpy(hierarchy, b, x0, tolerance, max_iterations)]
+        reference.append(poisson.solve_numpy(hierarchy, b, reference[0][0], tolerance, max_iterations))
+        reference.append(poisson.solve_numpy(hierarchy, np.zeros_like(b), x0, tolerance, max_iterations))
+    compiled = [poisson.solve(hierarchy, b, x0, tolerance, max_iterations)]
+    compiled.append(poisson.solve(hierarchy, b, compiled[0][0], tolerance, max_iterations))
+    compiled.append(poisson.solve(hierarchy, np.zeros_like(b), x0, tolerance, max_iterations))
+    first = reference[0][1]
+    assert first.iterations == max_iterations if max_iterations < 30 else 0 < first.iterations < max_iterations
+    assert reference[2][1].iterations == 0
+    for (x, report), (want_x, want_report) in zip(compiled, reference):
+        assert x.dtype == want_x.dtype == np.float32 and x.shape == want_x.shape == shape
+        assert np.array_equal(x.view(np.uint32), want_x.view(np.uint32))  # every bit, the sign of zero too
+        assert report.iterations == want_report.iterations
+        assert report.residual == want_report.residual and report.rhs == want_report.rhs
+
+
+def test_pairwise_sum_is_numpys_sum_bit_for_bit():
+    """The compiled solve's float64 sums are numpy's: a contiguous run summed pairwise (every length from 1 to
+    5000, a few longer, from an offset too), and a float32 field's float64 sum over its active cells (cast and
+    summed one numpy buffer at a time) with the zero-mean projection that uses it.  The values span 22 decades,
+    so that another order of the additions rounds differently (a plain left-to-right sum differs for 9 lengths in
+    10); the solve's own test would miss most such slips, as its dot products are rounded to float32 before use."""
+    from systems.toon_smoke.kernels import _pairwise_sum, _remove_mean, _sum_active
+
+    rng = np.random.default_rng(5)
+
+    def spread(n):
+        return np.exp(rng.uniform(-25.0, 25.0, n)) * rng.choice([-1.0, 1.0], n)
+
+    for n in list(range(1, 5001)) + [8191, 8192, 8193, 65536, 100003]:
+        values = spread(n)
+        assert 0.0 + _pairwise_sum(values, 0, n) == float(values.sum())
+        assert _pairwise_sum(values, 1, n - 1) + 0.0 == float(values[1:].sum())
+    buffer = np.getbufsize()
+    for n, buffer_size in [(100, buffer), (8193, buffer), (40000, buffer), (40000, 1024)]:
+        field = spread(n).astype(np.float32)
+        active = rng.random(n) < 0.9
+        want = field.copy()
+        try:
+            np.setbufsize(buffer_size)
+            want_sum = float(field[active].sum(dtype=np.float64))
+            poisson._remove_mean(want, active)
+        finally:
+            np.setbufsize(buffer)
+        assert _sum_active(field, active, np.empty(n), buffer_size) == (want_sum, active.sum())
+        got = field.copy()
+        _remove_mean(got, active, np.empty(n), buffer_size)
+        assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
 
 
 @pytest.mark.parametrize("shape", [(16, 16, 16), (12, 20, 9)])
