@@ -33,9 +33,15 @@ TARGET_RATIO = 50.0
 
 
 def load_preset(name: str) -> ToonSmokeVolumeConfig:
+    """A preset of configs/effects/toon_smoke/ by its name (``explosion``, or as a scene names it,
+    ``toon_smoke/explosion``); an unknown name exits with the names there are."""
     import tomllib
 
-    path = ROOT / "configs" / "effects" / "toon_smoke" / f"{name}.toml"
+    folder = ROOT / "configs" / "effects" / "toon_smoke"
+    path = folder / f"{name.removeprefix('toon_smoke/')}.toml"
+    if not path.is_file():
+        known = ", ".join(sorted(p.stem for p in folder.glob("*.toml")))
+        raise SystemExit(f"--preset {name!r}: no {path.relative_to(ROOT)}; the presets are {known}")
     return ToonSmokeVolumeConfig.model_validate(tomllib.loads(path.read_text(encoding="utf-8")))
 
 
