@@ -170,8 +170,9 @@ class FieldGpu:
         self.band_entries: OrderedDict[tuple[int, int], _BandEntry] = OrderedDict()
         self.band_layout: AtlasLayout | None = None
         self.band_tex: moderngl.Texture | None = None
-        # each band texel's distance from the eye that captured it (r32f; 0 where no grass, filtered like the
-        # colour): the band is fogged per texel at the distance of its grass
+        # each band texel's distance from the eye that captured it (0 where no grass, filtered like the colour): the
+        # band is fogged per texel at the distance of its grass.  r16f: its 1/1000 steps are far finer than the
+        # fog needs, at half the memory of r32f (9 MB beside the colour's 18 MB for a 1280-pixel-wide view)
         self.band_distance: moderngl.Texture | None = None
         self.band_fbo: moderngl.Framebuffer | None = None
         self.band_depth: moderngl.Renderbuffer | None = None
@@ -486,7 +487,7 @@ class FieldGpu:
         self.band_tex = self.ctx.texture(self.band_layout.size, 4)
         self.band_tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
         self.band_tex.repeat_x = self.band_tex.repeat_y = False
-        self.band_distance = self.ctx.texture(self.band_layout.size, 1, dtype="f4")
+        self.band_distance = self.ctx.texture(self.band_layout.size, 1, dtype="f2")
         self.band_distance.filter = (moderngl.LINEAR, moderngl.LINEAR)
         self.band_distance.repeat_x = self.band_distance.repeat_y = False
         self.band_depth = self.ctx.depth_renderbuffer(self.band_layout.size)
