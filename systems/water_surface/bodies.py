@@ -18,6 +18,9 @@ sub-steps, so a very light body at a long fixed step may exceed it).
 Contacts with the pool's floor (the water's ``depth``) and walls (its footprint): every penetrating box corner
 (or sphere support point) gets a normal impulse with restitution and a Coulomb friction impulse, averaged over
 the body's contacts, then the body is pushed out.
+
+The systems call :func:`integrate`: one compiled call per water (``body_kernels.float_bodies``) for all of it,
+sub-steps and contacts, with the bits of :func:`integrate_numpy`, the numpy statement of the method.
 """
 
 from __future__ import annotations
@@ -29,10 +32,12 @@ import numpy as np
 
 from engine.exact import matmul, matvec, vecmat
 from engine.spatial import cross, quat_mul
+from systems.water_surface import body_kernels as BK
 from systems.water_surface import kernels as K
 from systems.water_surface.geometry import BOX, F64, SPHERE, Grid, all_of, bilinear_slope_pair, max_of, sum_of
 
-__all__ = ["BodyArrays", "apply_impulses", "inertia", "integrate", "limit_speeds", "pool_contacts", "water_forces"]
+__all__ = ["BodyArrays", "apply_impulses", "inertia", "integrate", "integrate_numpy", "limit_speeds", "pool_contacts",
+           "water_forces"]
 
 _BOX_N = 4
 _SPHERE_RINGS, _SPHERE_ANGLES = 8, 8
@@ -94,6 +99,10 @@ _BOX_TABLE, _BOX_SHARE = _padded(_BOX_SAMPLES, 1.0 / len(_BOX_SAMPLES))
 _SPHERE_TABLE, _SPHERE_SHARE = _padded(_SPHERE_SAMPLES, _SPHERE_COLUMN_SHARE)
 _SPHERE_THICKNESS = np.ones(_SAMPLES)  # chords in units of radius (1 on padding, which holds no volume)
 _SPHERE_THICKNESS[:len(_SPHERE_SAMPLES)] = _SPHERE_CHORDS
+# the same for the compiled step (body_kernels.float_bodies), one row each: box lattice (3), sphere columns (3),
+# box shares, sphere shares, sphere chords
+_SAMPLE_TABLE = np.concatenate([_BOX_TABLE, _SPHERE_TABLE, [_BOX_SHARE, _SPHERE_SHARE, _SPHERE_THICKNESS]])
+_DRY, _DRY_GRID = np.zeros((2, 2)), Grid(2, 2, 1.0, 0.0, 0.0, 0.0)  # placeholders for bodies out of any water
 
 
 @dataclass
@@ -219,13 +228,52 @@ def substeps(bodies: BodyArrays, density: float, dt: float) -> int:
     faces = 4.0 * np.maximum(np.maximum(half[:, 0] * half[:, 1], half[:, 1] * half[:, 2]), half[:, 0] * half[:, 2])
     area = np.where(bodies.shapes == SPHERE, np.pi * bodies.radius ** 2, faces)
     omega = np.sqrt(density * np.maximum(bodies.gravity, 1e-9) * area / bodies.mass)
-    return min(max(math.ceil(float(max_of(omega)) * dt / _OMEGA_DT), 1), _MAX_SUBSTEPS)
+    return _steps(float(max_of(omega)) * dt / _OMEGA_DT)
+
+
+def _steps(rate: float) -> int:
+    return min(max(math.ceil(rate), 1), _MAX_SUBSTEPS)
 
 
 def integrate(bodies: BodyArrays, dt: float, water: tuple | None, linear_drag: float = 0.0,
-              angular_drag: float = 0.0, density: float = 1000.0) -> F64:
-    """Advance the bodies by ``dt`` (sub-stepped); ``water`` = (heights z(t), z(t − 1), grid) or None.
-    Returns the submerged volume (B,) of the last sub-step."""
+              angular_drag: float = 0.0, density: float = 1000.0, floor: float | None = None) -> F64:
+    """Advance the bodies by ``dt`` (sub-stepped); ``water`` = (heights z(t), z(t − 1), grid) or None. With
+    ``floor`` (the pool's floor, world y; in the water only), then the contacts with the pool (:func:`pool_contacts`)
+    and the speed limits again. Returns the submerged volume (B,) of the last sub-step.
+
+    One compiled call (``body_kernels.float_bodies``) after the damping's exponentials, the bits of
+    :func:`integrate_numpy` (a few hundred numpy calls on arrays of a few elements)."""
+    n = len(bodies)
+    submerged = np.zeros(n)
+    if n == 0:
+        return submerged
+    if water is None:
+        heights = previous = _DRY
+        grid, steps = _DRY_GRID, 1
+    else:
+        heights, previous, grid = water
+        steps = _steps(BK.substep_rate(bodies.shapes, bodies.half, bodies.radius, bodies.mass, bodies.gravity,
+                                       float(density), float(dt)))
+    h = dt / steps
+    state = np.concatenate((bodies.position, bodies.rotation, bodies.velocity, bodies.spin), axis=1)
+    BK.float_bodies(state, submerged, bodies.shapes, bodies.half, bodies.radius, bodies.radius ** 3, bodies.mass,
+                    bodies.gravity, bodies.force, bodies.torque, np.exp(-bodies.linear_damping * h),
+                    np.exp(-bodies.angular_damping * h), bodies.max_speed, bodies.max_spin, bodies.restitution,
+                    bodies.friction, steps, float(h), float(dt), water is not None, heights, previous, grid.nx,
+                    grid.nz, float(grid.x0), float(grid.z0), float(grid.h), float(grid.y0), float(linear_drag),
+                    float(angular_drag), float(density), 0.0 if floor is None else float(floor),
+                    water is not None and floor is not None, _SAMPLE_TABLE, len(_BOX_SAMPLES), K.QUAT_TERMS,
+                    _PLANE_NORMALS, _CORNERS)
+    bodies.position, bodies.rotation = state[:, BK.POSITION:BK.ROTATION], state[:, BK.ROTATION:BK.VELOCITY]
+    bodies.velocity, bodies.spin = state[:, BK.VELOCITY:BK.SPIN], state[:, BK.SPIN:]
+    return submerged
+
+
+def integrate_numpy(bodies: BodyArrays, dt: float, water: tuple | None, linear_drag: float = 0.0,
+                    angular_drag: float = 0.0, density: float = 1000.0, floor: float | None = None) -> F64:
+    """:func:`integrate` in numpy, its reference: semi-implicit Euler, vectorized over the bodies, per sub-step
+    the forces (:func:`water_forces`), Euler's equations and the quaternion's rate; then, with ``floor``,
+    :func:`pool_contacts` and :func:`limit_speeds`."""
     n = substeps(bodies, density, dt) if water is not None else 1
     h = dt / n
     moments = inertia(bodies)
@@ -265,6 +313,9 @@ def integrate(bodies: BodyArrays, dt: float, water: tuple | None, linear_drag: f
         bodies.position = bodies.position + h * bodies.velocity
         q = bodies.rotation + (0.5 * h) * _spin_product(spin, bodies.rotation)
         bodies.rotation = q / np.sqrt(sum_of(q * q, axis=1))[:, None]
+    if water is not None and floor is not None:
+        pool_contacts(bodies, water[2], floor, np.ones(len(bodies), bool))
+        limit_speeds(bodies)  # contact impulses may spin a body past its limit
     return submerged
 
 

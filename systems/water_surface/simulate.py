@@ -22,7 +22,7 @@ from engine.impacts import Impact
 from engine.spatial import Transform, cross
 from engine.world import World
 from systems.water_surface import kernels as K
-from systems.water_surface.bodies import BodyArrays, apply_impulses, integrate, limit_speeds, pool_contacts
+from systems.water_surface.bodies import BodyArrays, apply_impulses, integrate
 from systems.water_surface.geometry import BOX, SPHERE, Bodies, Grid, bilinear, empty_bodies
 from systems.water_surface.surface import step_water
 
@@ -127,14 +127,15 @@ def _gather_dynamic(world: World, dt: float):
 
 
 def bodies_system(world: World, dt: float) -> None:
-    """Rigid bodies: pending impulses, then forces and integration per water they float on, then pool contacts."""
+    """Rigid bodies: pending impulses, then per water they float on (and for those over none) one compiled call
+    for the forces, the integration and the pool's contacts (``bodies.integrate``)."""
     rows = _gather_dynamic(world, dt)
     if not rows:
         return
     _, transforms, configs, states, colliders = zip(*rows)
     scale = np.abs(np.array([t.scale for t in transforms]))
     constants = np.array([(c.mass, c.gravity, c.linear_damping, c.angular_damping, c.restitution, c.friction,
-                           c.max_speed, c.max_angular_speed) for c in configs]).T
+                           c.max_speed, c.max_angular_speed) for c in configs]).T.copy()  # contiguous rows
     arrays = BodyArrays(
         shapes=np.array([BOX if c.shape == "box" else SPHERE for c in colliders], np.int8),
         half=np.array([c.half_extents for c in colliders]) * scale,
@@ -166,9 +167,7 @@ def bodies_system(world: World, dt: float) -> None:
             _, (t, cfg, state) = waters[w]
             grid = water_grid(cfg, state, t)
             submerged[index] = integrate(group, dt, (state.heights, state.previous, grid), cfg.linear_drag,
-                                         cfg.angular_drag, cfg.water_density)
-            pool_contacts(group, grid, grid.y0 - cfg.depth, np.ones(len(index), bool))
-            limit_speeds(group)  # contact impulses may spin a body past its limit
+                                         cfg.angular_drag, cfg.water_density, floor=grid.y0 - cfg.depth)
         if not whole:
             _put(arrays, index, group)
     # write back: rows of fresh arrays (one copy each, not one per body)
