@@ -11,7 +11,8 @@ cells or particles runs at C speed and with no temporaries.
 
 - ``cache=True``: the machine code is written beside the module (``__pycache__``) and reused by later processes,
   so only the first run on a machine pays the compile (a fraction of a second for a small kernel, tens of seconds
-  for the water's whole outline step; about a minute and a half for all the effects' kernels).
+  for the water's whole outline step or the smoke's MGPCG solve; about two minutes for all the effects'
+  kernels).
 - ``fastmath=False``: IEEE arithmetic in the order written.  LLVM then may not reassociate sums or fuse
   multiply-adds, so a kernel gives the same bits in every run and process, like numpy's ``+ - * /``.  Keep
   transcendental functions in float64, as everywhere (``docs/`` and the conventions explain why).
