@@ -72,7 +72,7 @@ def _water(t: int) -> tuple[np.ndarray, np.ndarray, Grid]:
     return heights(t), heights(t - 1), GRID
 
 
-def _step_both(fast: BodyArrays, slow: BodyArrays, water, t: int, what: str, **options) -> None:
+def assert_step_matches(fast: BodyArrays, slow: BodyArrays, water, t: int, what: str, **options) -> None:
     want = integrate_numpy(slow, DT, water, **options)
     got = integrate(fast, DT, water, **options)
     assert_same_bits(got, want, f"{what}, tick {t}: submerged volume")
@@ -125,7 +125,7 @@ def test_the_compiled_step_repeats_the_numpy_step_bit_for_bit(name):
     fast = copy.deepcopy(slow)
     with np.errstate(all="ignore"):
         for t in range(150):
-            _step_both(fast, slow, _water(t), t, name, **POOL)
+            assert_step_matches(fast, slow, _water(t), t, name, **POOL)
 
 
 def test_the_scenes_cover_one_and_eight_sub_steps():
@@ -141,7 +141,7 @@ def test_bodies_out_of_any_water(name):
     fast = copy.deepcopy(slow)
     with np.errstate(all="ignore"):
         for t in range(90):
-            _step_both(fast, slow, None, t, f"{name}, dry")
+            assert_step_matches(fast, slow, None, t, f"{name}, dry")
 
 
 def test_bodies_leaving_the_pool_without_contacts():
@@ -151,7 +151,7 @@ def test_bodies_leaving_the_pool_without_contacts():
     fast = copy.deepcopy(slow)
     for t in range(120):
         water = None if t % 40 >= 30 else _water(t)
-        _step_both(fast, slow, water, t, "leaving the pool, no contacts", linear_drag=0.3, density=1000.0)
+        assert_step_matches(fast, slow, water, t, "leaving the pool, no contacts", linear_drag=0.3, density=1000.0)
     assert substeps(slow, 1000.0, DT) > 1
     assert (np.abs(slow.position[:, [0, 2]]) > 3.5).all(axis=1).sum() >= 1  # out over the edge
 
@@ -166,7 +166,7 @@ def test_impulses_between_ticks():
             impulse[rng.random(5) < 0.4] = 0.0
             apply_impulses(slow, impulse, angular)
             apply_impulses(fast, impulse, angular)
-        _step_both(fast, slow, _water(t), t, "impulses", **POOL)
+        assert_step_matches(fast, slow, _water(t), t, "impulses", **POOL)
 
 
 def test_an_empty_group_and_one_body_at_rest():
@@ -177,7 +177,7 @@ def test_an_empty_group_and_one_body_at_rest():
     slow = _arrays(_body(position=(0.0, 0.2, 0.0)))
     fast = copy.deepcopy(slow)
     for t in range(60):
-        _step_both(fast, slow, flat, t, "at rest", **POOL)
+        assert_step_matches(fast, slow, flat, t, "at rest", **POOL)
 
 
 # ----------------------------------------------------------------------------------------- through the systems
@@ -241,7 +241,7 @@ def _compare_worlds(fast: App, slow: App, what: str) -> None:
     assert fast.state_hash() == slow.state_hash(), what
 
 
-def _step_apps(fast: App, slow: App, monkeypatch, ticks: int, what: str, between=None) -> None:
+def assert_apps_match(fast: App, slow: App, monkeypatch, ticks: int, what: str, between=None) -> None:
     """Tick both apps, ``slow`` with the systems calling integrate_numpy; the same bits after every tick."""
     for t in range(ticks):
         if between is not None:
@@ -259,7 +259,7 @@ def test_two_waters_and_dry_land_through_the_systems(tmp_path, monkeypatch):
     one body runs into the first pool's corner."""
     fast, slow = _two_apps(tmp_path, "resolution = [24, 24]\nspacing = 0.3\nwave_speed = 1.5\ndamping = 0.995\n"
                            "depth = 1.0\nlinear_drag = 0.5\nangular_drag = 0.3", TWO_WATERS)
-    _step_apps(fast, slow, monkeypatch, 240, "two waters")
+    assert_apps_match(fast, slow, monkeypatch, 240, "two waters")
 
 
 def test_scripts_impulses_and_forces_through_the_systems(tmp_path, monkeypatch):
@@ -279,10 +279,10 @@ def test_scripts_impulses_and_forces_through_the_systems(tmp_path, monkeypatch):
     fast, slow = _two_apps(tmp_path, "resolution = [24, 24]\nspacing = 0.3\nwave_speed = 1.5\ndamping = 0.995\n"
                            "depth = 1.0", TWO_WATERS)
     with np.errstate(all="ignore"):
-        _step_apps(fast, slow, monkeypatch, 150, "impulses and forces", between=kick)
+        assert_apps_match(fast, slow, monkeypatch, 150, "impulses and forces", between=kick)
 
 
 def test_the_showcase_scene_through_the_systems(monkeypatch):
     scene = CONFIGS / "scenes" / "water_surface_showcase.toml"
     fast, slow = App(scene, seed=3), App(scene, seed=3)
-    _step_apps(fast, slow, monkeypatch, 200, "showcase")
+    assert_apps_match(fast, slow, monkeypatch, 200, "showcase")
