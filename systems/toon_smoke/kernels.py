@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from engine.jit import kernel
+from engine.jit import kernel, pairwise_sum
 
 
 @kernel
@@ -508,71 +508,8 @@ def residual_kernel(x, b, diag, inactive, sx, sy, coefficients, weighted, start,
 # than the arithmetic.  :func:`mgpcg_kernel` runs the same loop, from the initial residual to the report, with the
 # same float32 operations in the same order (the smoothers, residual and restriction above, called per level) and
 # numpy's float64 reductions written out: a contiguous ``sum`` is numpy's pairwise summation
-# (:func:`_pairwise_sum`), and a float32 array summed with ``dtype=np.float64`` is cast in buffers of
+# (:func:`engine.jit.pairwise_sum`), and a float32 array summed with ``dtype=np.float64`` is cast in buffers of
 # ``np.getbufsize()`` elements, each buffer summed pairwise and added to a running total that starts at +0.
-
-
-@kernel(inline="always")
-def _pairwise_block(values, start, n):  # pragma: no cover
-    """numpy's sum of a run of at most 128 float64 values (see :func:`_pairwise_sum`)."""
-    if n < 8:
-        total = -0.0
-        for t in range(start, start + n):
-            total += values[t]
-        return total
-    r0, r1, r2, r3 = values[start], values[start + 1], values[start + 2], values[start + 3]
-    r4, r5, r6, r7 = values[start + 4], values[start + 5], values[start + 6], values[start + 7]
-    blocks = start + n - n % 8
-    for t in range(start + 8, blocks, 8):
-        r0 += values[t]
-        r1 += values[t + 1]
-        r2 += values[t + 2]
-        r3 += values[t + 3]
-        r4 += values[t + 4]
-        r5 += values[t + 5]
-        r6 += values[t + 6]
-        r7 += values[t + 7]
-    total = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
-    for t in range(blocks, start + n):
-        total += values[t]
-    return total
-
-
-@kernel
-def _pairwise_sum(values, start, n):  # pragma: no cover
-    """Σ values[start:start + n] (float64) as numpy sums a contiguous run (``pairwise_sum`` of
-    numpy/_core/src/umath/loops_utils.h.src): fewer than 8 terms left to right from −0; up to 128 in eight
-    interleaved partial sums, combined ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7)), then the remainder
-    left to right; a longer run is split at half its length rounded down to a multiple of 8 and the two halves'
-    sums added.  numpy recurses; here the same tree is walked depth first with a stack of the runs being summed
-    (a recursive kernel crashed the cached kernels that call it, numba 0.68)."""
-    if n <= 128:
-        return _pairwise_block(values, start, n)
-    lo = np.empty(64, np.int64)  # the runs from the whole one down to the current one (halving: 64 is ample)
-    size = np.empty(64, np.int64)
-    left = np.empty(64)  # a run's left half's sum, once known
-    has_left = np.zeros(64, np.bool_)
-    depth = 0
-    lo[0], size[0] = start, n
-    while True:
-        if size[depth] > 128:  # descend into the left half
-            half = size[depth] // 2
-            half -= half % 8
-            lo[depth + 1], size[depth + 1], has_left[depth + 1] = lo[depth], half, False
-            depth += 1
-            continue
-        total = _pairwise_block(values, lo[depth], size[depth])
-        depth -= 1
-        while has_left[depth]:  # a right half: its run is complete, hand the sum up
-            total = left[depth] + total
-            if depth == 0:
-                return total
-            depth -= 1
-        left[depth], has_left[depth] = total, True  # a left half: go on with the right one
-        half = size[depth] // 2
-        half -= half % 8
-        lo[depth + 1], size[depth + 1], has_left[depth + 1] = lo[depth] + half, size[depth] - half, False
-        depth += 1
 
 
 @kernel
@@ -582,7 +519,7 @@ def _dot(a, b, products):  # pragma: no cover
     n = a.shape[0]
     for t in range(n):
         products[t] = np.float64(a[t]) * np.float64(b[t])
-    return 0.0 + _pairwise_sum(products, 0, n)
+    return 0.0 + pairwise_sum(products, 0, n)
 
 
 @kernel(inline="always")
@@ -608,7 +545,7 @@ def _sum_active(x, active, values, buffer_size):  # pragma: no cover
             count += 1
     total = 0.0
     for lo in range(0, count, buffer_size):
-        total += _pairwise_sum(values, lo, min(buffer_size, count - lo))
+        total += pairwise_sum(values, lo, min(buffer_size, count - lo))
     return total, count
 
 
@@ -652,27 +589,20 @@ def _span(levels, d):  # pragma: no cover
 
 
 @kernel(inline="always")
-def _scatter(compact, padded, shape, padded_shape):  # pragma: no cover
-    """A compact field (C order over ``shape``) into the real cells of a padded flat vector (ghosts untouched)."""
+def _copy_real_cells(padded, compact, shape, padded_shape, into_padded):  # pragma: no cover
+    """Copy between a compact field (C order over ``shape``) and the real cells of a padded flat vector: into the
+    padded one when ``into_padded`` (its ghosts untouched), else out of it."""
     py, pz, nz = padded_shape[1], padded_shape[2], shape[2]
     for i in range(shape[0]):
         for j in range(shape[1]):
             row, c = ((i + 1) * py + (j + 1)) * pz + 1, (i * shape[1] + j) * nz
-            source, target = compact[c:c + nz], padded[row:row + nz]
-            for k in range(nz):  # views indexed by the loop counter: 3x faster than a slice assignment
-                target[k] = source[k]
-
-
-@kernel(inline="always")
-def _gather(padded, compact, shape, padded_shape):  # pragma: no cover
-    """The real cells of a padded flat vector into a compact field (C order over ``shape``)."""
-    py, pz, nz = padded_shape[1], padded_shape[2], shape[2]
-    for i in range(shape[0]):
-        for j in range(shape[1]):
-            row, c = ((i + 1) * py + (j + 1)) * pz + 1, (i * shape[1] + j) * nz
-            source, target = padded[row:row + nz], compact[c:c + nz]
-            for k in range(nz):
-                target[k] = source[k]
+            inner, outer = padded[row:row + nz], compact[c:c + nz]
+            if into_padded:
+                for k in range(nz):  # views indexed by the loop counter: 3x faster than a slice assignment
+                    inner[k] = outer[k]
+            else:
+                for k in range(nz):
+                    outer[k] = inner[k]
 
 
 @kernel
@@ -682,14 +612,14 @@ def _apply_operator(levels, phi, shape, out):  # pragma: no cover
     compact ``out``."""
     x, _, r, padded_shape = _vectors(levels, 0)
     s, diag, _, _, _, _, inactive, _, coefficients, sx, sy, weighted = _span(levels, 0)
-    _scatter(phi, x, shape, padded_shape)
+    _copy_real_cells(x, phi, shape, padded_shape, True)
     _neighbour_sums(x, sx, sy, coefficients, weighted, sx, s)
     n = s.shape[0]
     xs, rs = x[sx:sx + n], r[sx:sx + n]
     for t in range(n):
         v = diag[t] * xs[t] - s[t]
         rs[t] = np.float32(0.0) if (inactive[t] and not weighted) else v
-    _gather(r, out, shape, padded_shape)
+    _copy_real_cells(r, out, shape, padded_shape, False)
 
 
 @kernel
@@ -700,7 +630,7 @@ def _v_cycle(levels, rhs, shape, products, sweeps, out):  # pragma: no cover
     post-smoothing."""
     count, dense_inverse, dense_cells = levels[0].shape[0], levels[7], levels[8]
     _, b, _, padded_shape = _vectors(levels, 0)
-    _scatter(rhs, b, shape, padded_shape)
+    _copy_real_cells(b, rhs, shape, padded_shape, True)
     for d in range(count - 1):  # loop over the levels, down
         x, b, r, padded_shape = _vectors(levels, d)
         s, diag, red, black, keep_red, keep_black, inactive, _, coefficients, sx, sy, weighted = _span(levels, d)
@@ -718,7 +648,7 @@ def _v_cycle(levels, rhs, shape, products, sweeps, out):  # pragma: no cover
     for i in range(m):
         for j in range(m):
             products[j] = dense_inverse[i, j] * coarse_b[j]
-        x[dense_cells[i]] = np.float32(0.0 + _pairwise_sum(products, 0, m))
+        x[dense_cells[i]] = np.float32(0.0 + pairwise_sum(products, 0, m))
     for d in range(count - 2, -1, -1):  # loop over the levels, up
         x, b = _vectors(levels, d)[:2]
         s, _, red, black, keep_red, keep_black, inactive, parent, coefficients, sx, sy, weighted = _span(levels, d)
@@ -726,7 +656,7 @@ def _v_cycle(levels, rhs, shape, products, sweeps, out):  # pragma: no cover
         post_smooth_kernel(x, b[sx:sx + n], red, black, keep_red, keep_black, sx, sy, coefficients, weighted, sx, s,
                            sweeps, _vectors(levels, d + 1)[0], parent, inactive)
     x, _, _, padded_shape = _vectors(levels, 0)
-    _gather(x, out, shape, padded_shape)
+    _copy_real_cells(x, out, shape, padded_shape, False)
 
 
 @kernel

@@ -7,7 +7,7 @@ readable statement of the method and the reference: this kernel does their IEEE 
 output has the same bits (``tests/systems/water_surface/test_body_kernels.py``). In numpy the step of a few bodies
 is some 200 calls on arrays of a few elements, bound by the cost of a call. Repeating numpy's order takes:
 
-- a sum over an array's last axis is numpy's pairwise summation (``kernels.pairwise_sum``) added to 0.0, the
+- a sum over an array's last axis is numpy's pairwise summation (``engine.jit.pairwise_sum``) added to 0.0, the
   reduction's start, so a sum of −0.0 is +0.0; a sum along another axis adds in index order from 0.0;
 - ``engine.exact``'s products add their terms left to right, every product written out, even by a constant 0
   (0·x is −0.0 or NaN for some x), and the quaternion rate keeps (0, ω)'s zero;
@@ -28,7 +28,7 @@ import math
 import numpy as np
 
 from engine.jit import kernel
-from systems.water_surface.kernels import pairwise_sum
+from engine.jit import pairwise_sum
 
 BOX, SPHERE = 0, 1  # geometry.BOX / SPHERE
 OMEGA_DT = 0.3  # bodies._OMEGA_DT

@@ -4,8 +4,8 @@
 The numpy functions of ``outline.py``, ``waves.py`` and ``surface.py`` are the readable statement of the method;
 these kernels do the same arithmetic in the same order, in a few calls per step instead of hundreds of numpy calls
 (a 26 × 26 pool is bound by per-call overhead) and in one pass over a large grid instead of seven. Results are the
-same bits: where numpy sums an array it uses pairwise summation (:func:`pairwise_sum` repeats it), ``bincount``
-sums in order of appearance, a reduction along a leading axis sums in index order; the tests compare every kernel
+same bits: where numpy sums an array it uses pairwise summation (:func:`engine.jit.pairwise_sum` repeats it),
+``bincount`` sums in order of appearance, a reduction along a leading axis sums in index order; the tests compare every kernel
 with its numpy counterpart.
 
 No loop here runs in Python: each is compiled (numba), with IEEE arithmetic in the order written (no fastmath).
@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from engine.jit import kernel
+from engine.jit import kernel, pairwise_sum
 
 # Constants of outline.py / geometry.py, repeated as plain numbers for the compiled code.
 EPS_LINE = 1e-7
@@ -27,81 +27,6 @@ CROSSING_KEY = 1 << 30
 MAX_BOX_VERTICES = 6
 DENSE_PAIRS = 96
 BUFFER = 8192  # numpy's iterator buffer: a strided window's mean sums blocks of this many values
-
-
-# --------------------------------------------------------------------------------------------- summation
-@kernel
-def _block_sum(a, start, n):
-    """numpy's pairwise summation of up to 128 values: one by one below 8, else 8 accumulators."""
-    if n < 8:
-        res = 0.0
-        for i in range(n):
-            res += a[start + i]
-        return res
-    r0, r1, r2, r3 = a[start], a[start + 1], a[start + 2], a[start + 3]
-    r4, r5, r6, r7 = a[start + 4], a[start + 5], a[start + 6], a[start + 7]
-    i = 8
-    stop = n - n % 8
-    while i < stop:
-        j = start + i
-        r0 += a[j]
-        r1 += a[j + 1]
-        r2 += a[j + 2]
-        r3 += a[j + 3]
-        r4 += a[j + 4]
-        r5 += a[j + 5]
-        r6 += a[j + 6]
-        r7 += a[j + 7]
-        i += 8
-    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
-    while i < n:
-        res += a[start + i]
-        i += 1
-    return res
-
-
-@kernel
-def pairwise_sum(a, start, n):
-    """numpy's pairwise summation of ``a[start:start + n]`` (float64, contiguous): blocks of up to 128 summed
-    with 8 accumulators, longer runs split in two at a multiple of 8 (left + right). ``np.add.reduce`` of a
-    contiguous array is ``0.0 + pairwise_sum``. The recursion runs on an explicit stack (numba's cache does not
-    keep recursive functions)."""
-    if n <= 128:
-        return _block_sum(a, start, n)
-    starts = np.empty(64, np.int64)
-    sizes = np.empty(64, np.int64)
-    stage = np.empty(64, np.int64)
-    left = np.empty(64)
-    top = 0
-    starts[0], sizes[0], stage[0] = start, n, 0
-    ret = 0.0
-    have = False
-    while True:
-        if have:  # a finished child: the left half waits for the right one, the right one completes the sum
-            if top < 0:
-                return ret
-            if stage[top] == 1:
-                left[top] = ret
-                stage[top] = 2
-                half = sizes[top] // 2
-                half -= half % 8
-                top += 1
-                starts[top], sizes[top], stage[top] = starts[top - 1] + half, sizes[top - 1] - half, 0
-                have = False
-            else:
-                ret = left[top] + ret
-                top -= 1
-            continue
-        if sizes[top] <= 128:
-            ret = _block_sum(a, starts[top], sizes[top])
-            top -= 1
-            have = True
-            continue
-        half = sizes[top] // 2
-        half -= half % 8
-        stage[top] = 1
-        top += 1
-        starts[top], sizes[top], stage[top] = starts[top - 1], half, 0
 
 
 @kernel

@@ -267,7 +267,8 @@ def test_pairwise_sum_is_numpys_sum_bit_for_bit():
     summed one numpy buffer at a time) with the zero-mean projection that uses it.  The values span 22 decades,
     so that another order of the additions rounds differently (a plain left-to-right sum differs for 9 lengths in
     10); the solve's own test would miss most such slips, as its dot products are rounded to float32 before use."""
-    from systems.toon_smoke.kernels import _pairwise_sum, _remove_mean, _sum_active
+    from engine.jit import pairwise_sum
+    from systems.toon_smoke.kernels import _remove_mean, _sum_active
 
     rng = np.random.default_rng(5)
 
@@ -276,8 +277,8 @@ def test_pairwise_sum_is_numpys_sum_bit_for_bit():
 
     for n in list(range(1, 5001)) + [8191, 8192, 8193, 65536, 100003]:
         values = spread(n)
-        assert 0.0 + _pairwise_sum(values, 0, n) == float(values.sum())
-        assert _pairwise_sum(values, 1, n - 1) + 0.0 == float(values[1:].sum())
+        assert 0.0 + pairwise_sum(values, 0, n) == float(values.sum())
+        assert pairwise_sum(values, 1, n - 1) + 0.0 == float(values[1:].sum())
     buffer = np.getbufsize()
     for n, buffer_size in [(100, buffer), (8193, buffer), (40000, buffer), (40000, 1024)]:
         field = spread(n).astype(np.float32)

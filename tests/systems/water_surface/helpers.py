@@ -37,6 +37,22 @@ def sphere(x: float, z: float, radius: float = 0.5, y: float = 0.0, entity: int 
                   np.array([[x, y, z]]), np.eye(3)[None])
 
 
+def rigid_body_entity(name: str, position, scale=(1.0, 0.6, 0.8), rotation=(0.0, 0.0, 0.0), **rigid) -> str:
+    """A scene's [[entities]] table: a RigidBody (its keys ``rigid``, written as TOML) with a Transform."""
+    fields = "\n".join(f"{k} = {v!r}".replace("'", '"').replace("True", "true").replace("False", "false")
+                       for k, v in rigid.items())
+    return f"""
+[[entities]]
+name = "{name}"
+[entities.components.Transform]
+position = {list(position)}
+rotation = {list(rotation)}
+scale = {list(scale)}
+[entities.components.RigidBody]
+{fields}
+"""
+
+
 def water_config(**values) -> WaterSurface:
     base = dict(resolution=[26, 26], spacing=0.4, wave_speed=1.5, damping=1.0)
     base.update(values)

@@ -11,24 +11,9 @@ from engine.impacts import Impact
 from engine.spatial import Transform, quat_rotate
 from systems.water_surface.bodies import BodyArrays, inertia
 from systems.water_surface.geometry import BOX, SPHERE
-from tests.systems.water_surface.helpers import CONFIGS, write_scene
+from tests.systems.water_surface.helpers import CONFIGS, rigid_body_entity, write_scene
 
 WATER = "resolution = [16, 16]\nspacing = 0.4\nwave_speed = 1.5\ndamping = 0.99\ndepth = 1.0"
-
-
-def _body(name: str, position, scale=(1.0, 0.6, 0.8), rotation=(0.0, 0.0, 0.0), **rigid) -> str:
-    fields = "\n".join(f"{k} = {v!r}".replace("'", '"').replace("True", "true").replace("False", "false")
-                       for k, v in rigid.items())
-    return f"""
-[[entities]]
-name = "{name}"
-[entities.components.Transform]
-position = {list(position)}
-rotation = {list(rotation)}
-scale = {list(scale)}
-[entities.components.RigidBody]
-{fields}
-"""
 
 
 def _app(tmp_path, bodies: str, water: str = WATER) -> App:
@@ -60,7 +45,7 @@ def test_inertia_follows_the_shape():
 
 
 def test_a_box_released_above_the_water_settles_at_its_draft(tmp_path):
-    app = _app(tmp_path, _body("crate", (0.2, 0.45, -0.1), mass=200.0))
+    app = _app(tmp_path, rigid_body_entity("crate", (0.2, 0.45, -0.1), mass=200.0))
     crate = _entity(app, "crate")
     app.step(420)
     t, state = app.world.get(crate, Transform), app.world.get(crate, RigidBodyState)
@@ -71,7 +56,7 @@ def test_a_box_released_above_the_water_settles_at_its_draft(tmp_path):
 
 
 def test_a_sphere_floats_with_its_weight_of_water_displaced(tmp_path):
-    app = _app(tmp_path, _body("buoy", (0.0, 0.6, 0.0), scale=(1.0, 1.0, 1.0), shape="sphere", mass=150.0))
+    app = _app(tmp_path, rigid_body_entity("buoy", (0.0, 0.6, 0.0), scale=(1.0, 1.0, 1.0), shape="sphere", mass=150.0))
     buoy = _entity(app, "buoy")
     app.step(420)
     assert app.world.get(buoy, RigidBodyState).submerged_volume == pytest.approx(0.15, rel=0.03)
@@ -82,7 +67,7 @@ def test_a_sphere_floats_at_the_draft_of_its_spherical_cap(tmp_path, density):
     """The centre's height against the exact cap π·d²·(3r − d)/3 = m/ρ for a radius of 0.5 m: within 2 mm (the
     81 lattice points of the old sampling put it 1.6–2.8 cm off)."""
     r, volume = 0.5, 4.0 / 3.0 * np.pi * 0.5 ** 3
-    app = _app(tmp_path, _body("buoy", (0.0, 0.2, 0.0), scale=(1.0, 1.0, 1.0), shape="sphere",
+    app = _app(tmp_path, rigid_body_entity("buoy", (0.0, 0.2, 0.0), scale=(1.0, 1.0, 1.0), shape="sphere",
                                mass=density * 1000.0 * volume))
     buoy = _entity(app, "buoy")
     app.step(600)
@@ -94,7 +79,7 @@ def test_a_sphere_floats_at_the_draft_of_its_spherical_cap(tmp_path, density):
 
 
 def test_a_body_denser_than_water_sinks_to_the_floor(tmp_path):
-    app = _app(tmp_path, _body("stone", (0.0, 0.5, 0.0), mass=1000.0))  # 0.48 m³: denser than water
+    app = _app(tmp_path, rigid_body_entity("stone", (0.0, 0.5, 0.0), mass=1000.0))  # 0.48 m³: denser than water
     stone = _entity(app, "stone")
     app.step(60)
     assert app.world.get(stone, Transform).position[1] < -0.5  # well under the surface
@@ -105,7 +90,7 @@ def test_a_body_denser_than_water_sinks_to_the_floor(tmp_path):
 
 
 def test_a_tilted_box_rights_itself(tmp_path):
-    app = _app(tmp_path, _body("raft", (0.0, 0.0, 0.0), scale=(1.2, 0.4, 1.0), rotation=(0.0, 0.0, 25.0),
+    app = _app(tmp_path, rigid_body_entity("raft", (0.0, 0.0, 0.0), scale=(1.2, 0.4, 1.0), rotation=(0.0, 0.0, 25.0),
                                mass=200.0))
     raft = _entity(app, "raft")
     app.step(1)
@@ -120,7 +105,7 @@ def test_a_box_floating_tilted_onto_an_edge_stops_bobbing(tmp_path, roll):
     move the outline while it bobs; with S' taken over its footprint only, its own outline waves raised S' in phase
     with the motion and it bobbed 0.24 m (45°) or 0.42 m (20°) peak to peak for good at α = 1."""
     water = "resolution = [26, 26]\nspacing = 0.4\nwave_speed = 1.5\noutline_constant = 1.0"
-    app = _app(tmp_path, _body("crate", (0.0, 0.3, 0.0), scale=(1.0, 1.0, 1.0), rotation=(0.0, 0.0, roll),
+    app = _app(tmp_path, rigid_body_entity("crate", (0.0, 0.3, 0.0), scale=(1.0, 1.0, 1.0), rotation=(0.0, 0.0, roll),
                                mass=250.0), water)
     crate = _entity(app, "crate")
     app.step(12 * 60)
@@ -132,7 +117,7 @@ def test_a_box_floating_tilted_onto_an_edge_stops_bobbing(tmp_path, roll):
     assert 25.0 < _roll_pitch(app.world.get(crate, Transform).rotation) < 65.0  # still tilted: it did float
 
 def test_a_script_impulse_changes_the_velocity_by_j_over_m(tmp_path):
-    app = _app(tmp_path, _body("crate", (0.0, 30.0, 0.0), mass=50.0, linear_damping=0.0))
+    app = _app(tmp_path, rigid_body_entity("crate", (0.0, 30.0, 0.0), mass=50.0, linear_damping=0.0))
     crate = _entity(app, "crate")
     app.registry.command("rigid_body.apply_impulse")(app.world, crate, impulse=(100.0, 0.0, -50.0))
     app.step(1)
@@ -141,7 +126,7 @@ def test_a_script_impulse_changes_the_velocity_by_j_over_m(tmp_path):
 
 
 def test_an_impact_event_pushes_and_spins_the_body(tmp_path):
-    app = _app(tmp_path, _body("crate", (0.0, 30.0, 0.0), scale=(1.0, 1.0, 1.0), mass=60.0, linear_damping=0.0,
+    app = _app(tmp_path, rigid_body_entity("crate", (0.0, 30.0, 0.0), scale=(1.0, 1.0, 1.0), mass=60.0, linear_damping=0.0,
                                angular_damping=0.0, gravity=0.0))
     crate = _entity(app, "crate")
     app.world.events.send(Impact(target=crate, point=(0.5, 30.0, 0.0), impulse=(0.0, 0.0, 12.0)))
@@ -166,7 +151,7 @@ def test_an_impact_on_the_water_makes_a_wave(tmp_path):
 def test_waves_move_a_floating_body(tmp_path):
     runs = []
     for splash in (False, True):
-        app = _app(tmp_path, _body("crate", (1.0, 0.05, 0.0), mass=200.0, linear_damping=0.0))
+        app = _app(tmp_path, rigid_body_entity("crate", (1.0, 0.05, 0.0), mass=200.0, linear_damping=0.0))
         crate = _entity(app, "crate")
         app.step(240)  # settle
         if splash:
@@ -182,7 +167,7 @@ def test_waves_move_a_floating_body(tmp_path):
 
 
 def test_a_body_away_from_any_water_falls_freely(tmp_path):
-    app = _app(tmp_path, _body("rock", (50.0, 10.0, 0.0), mass=10.0, linear_damping=0.0))
+    app = _app(tmp_path, rigid_body_entity("rock", (50.0, 10.0, 0.0), mass=10.0, linear_damping=0.0))
     rock = _entity(app, "rock")
     app.step(60)
     assert app.world.get(rock, Transform).position[1] == pytest.approx(10.0 - 0.5 * 9.81 * 1.0, abs=0.1)
@@ -190,7 +175,7 @@ def test_a_body_away_from_any_water_falls_freely(tmp_path):
 
 def test_a_kinematic_body_follows_its_script_and_keeps_its_velocity(tmp_path):
     glide = '{ name = "water_surface.glide", params = { velocity = [0.6, 0.0, 0.0], distance = 10.0 } }'
-    body = _body("barge", (-1.0, 0.0, 0.0), mass=100.0, kinematic=True).replace(
+    body = rigid_body_entity("barge", (-1.0, 0.0, 0.0), mass=100.0, kinematic=True).replace(
         'name = "barge"', f'name = "barge"\nscripts = [{glide}]')
     app = _app(tmp_path, body)
     barge = _entity(app, "barge")
@@ -214,7 +199,7 @@ def test_an_initial_spin_above_the_limit_is_a_config_error_naming_both_keys():
 def test_spin_and_speed_stay_finite_and_limited_whatever_a_script_gives_a_body(tmp_path, spin, impulse):
     """An asymmetric box spun at 5000 rad/s (explicit gyroscopic term: it blew up to NaN and crashed the water's
     rasterisation of the body) or kicked with an overflowing impulse keeps a finite state within its limits."""
-    app = _app(tmp_path, _body("crate", (0.2, 0.2, -0.1), scale=(1.0, 0.3, 0.6), mass=100.0,
+    app = _app(tmp_path, rigid_body_entity("crate", (0.2, 0.2, -0.1), scale=(1.0, 0.3, 0.6), mass=100.0,
                                max_angular_speed=1000.0))
     crate = _entity(app, "crate")
     state = app.world.get(crate, RigidBodyState)
@@ -235,7 +220,7 @@ def test_a_huge_force_or_torque_through_the_public_commands_keeps_the_body_withi
     ticks; 1e200 N at an offset crashed the water with NaN), and after the pool's contacts."""
     from systems.water_surface.api import apply_force
 
-    app = _app(tmp_path, _body("crate", (0.2, 0.2, -0.1), scale=(1.0, 0.3, 0.6), mass=100.0))
+    app = _app(tmp_path, rigid_body_entity("crate", (0.2, 0.2, -0.1), scale=(1.0, 0.3, 0.6), mass=100.0))
     crate = _entity(app, "crate")
     start = app.world.get(crate, Transform).position.copy()
     for _ in range(6):
@@ -256,7 +241,7 @@ def test_the_limit_scales_a_finite_velocity_too_long_to_square_instead_of_zeroin
 
 
 def test_a_contact_cannot_leave_the_spin_above_its_limit(tmp_path):
-    app = _app(tmp_path, _body("crate", (0.2, -0.3, -0.1), rotation=(35.0, 10.0, 20.0), mass=900.0,
+    app = _app(tmp_path, rigid_body_entity("crate", (0.2, -0.3, -0.1), rotation=(35.0, 10.0, 20.0), mass=900.0,
                                velocity=[0.0, -5.0, 0.0], max_angular_speed=0.5))
     crate = _entity(app, "crate")
     for _ in range(30):

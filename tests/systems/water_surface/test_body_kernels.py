@@ -22,7 +22,7 @@ from engine.spatial import Transform, quat_from_euler
 from systems.water_surface import simulate
 from systems.water_surface.bodies import BodyArrays, apply_impulses, integrate, integrate_numpy, substeps
 from systems.water_surface.geometry import BOX, SPHERE, Grid
-from tests.systems.water_surface.helpers import CONFIGS, write_scene
+from tests.systems.water_surface.helpers import CONFIGS, rigid_body_entity, write_scene
 
 DT = 1.0 / 60.0
 GRID = Grid(16, 14, 0.4, -3.0, -2.6, 0.2)
@@ -197,29 +197,14 @@ angular_drag = 0.5
 """
 
 
-def _rigid(name, position, shape="box", scale=(1.0, 0.6, 0.8), rotation=(0.0, 0.0, 0.0), **values) -> str:
-    fields = "\n".join(f"{k} = {v!r}" for k, v in values.items())
-    return f"""
-[[entities]]
-name = "{name}"
-[entities.components.Transform]
-position = {list(position)}
-rotation = {list(rotation)}
-scale = {list(scale)}
-[entities.components.RigidBody]
-shape = "{shape}"
-{fields}
-"""
-
-
 BODIES = "".join([
-    _rigid("crate", (0.5, 0.4, -0.3), rotation=(30.0, 8.0, 4.0), mass=200.0),
-    _rigid("ball", (-1.0, 1.5, 1.0), shape="sphere", scale=(0.8, 0.8, 0.8), mass=60.0),
-    _rigid("sinker", (1.5, 0.0, 1.5), scale=(0.6, 0.6, 0.6), mass=500.0),
-    _rigid("walker", (-2.2, 0.3, -2.0), velocity=[-4.0, 0.0, -3.0], mass=80.0),
-    _rigid("raft", (12.0, 0.7, 0.5), scale=(1.4, 0.3, 1.0), rotation=(10.0, 0.0, 15.0), mass=150.0),
-    _rigid("buoy", (13.5, 1.5, -0.5), shape="sphere", scale=(0.5, 0.5, 0.5), mass=2.0),  # 2 sub-steps
-    _rigid("falling", (6.0, 4.0, 0.0), rotation=(5.0, 20.0, 0.0), mass=100.0),
+    rigid_body_entity("crate", (0.5, 0.4, -0.3), rotation=(30.0, 8.0, 4.0), mass=200.0),
+    rigid_body_entity("ball", (-1.0, 1.5, 1.0), shape="sphere", scale=(0.8, 0.8, 0.8), mass=60.0),
+    rigid_body_entity("sinker", (1.5, 0.0, 1.5), scale=(0.6, 0.6, 0.6), mass=500.0),
+    rigid_body_entity("walker", (-2.2, 0.3, -2.0), velocity=[-4.0, 0.0, -3.0], mass=80.0),
+    rigid_body_entity("raft", (12.0, 0.7, 0.5), scale=(1.4, 0.3, 1.0), rotation=(10.0, 0.0, 15.0), mass=150.0),
+    rigid_body_entity("buoy", (13.5, 1.5, -0.5), shape="sphere", scale=(0.5, 0.5, 0.5), mass=2.0),  # 2 sub-steps
+    rigid_body_entity("falling", (6.0, 4.0, 0.0), rotation=(5.0, 20.0, 0.0), mass=100.0),
 ])
 
 
