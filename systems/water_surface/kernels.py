@@ -5,8 +5,8 @@ The numpy functions of ``outline.py``, ``waves.py`` and ``surface.py`` are the r
 these kernels do the same arithmetic in the same order, in a few calls per step instead of hundreds of numpy calls
 (a 26 × 26 pool is bound by per-call overhead) and in one pass over a large grid instead of seven. Results are the
 same bits: where numpy sums an array it uses pairwise summation (:func:`engine.jit.pairwise_sum` repeats it),
-``bincount`` sums in order of appearance, a reduction along a leading axis sums in index order; the tests compare every kernel
-with its numpy counterpart.
+``bincount`` sums in order of appearance, a reduction along a leading axis sums in index order; the tests compare
+every kernel with its numpy counterpart.
 
 No loop here runs in Python: each is compiled (numba), with IEEE arithmetic in the order written (no fastmath).
 """

@@ -68,7 +68,7 @@ def test_a_sphere_floats_at_the_draft_of_its_spherical_cap(tmp_path, density):
     81 lattice points of the old sampling put it 1.6–2.8 cm off)."""
     r, volume = 0.5, 4.0 / 3.0 * np.pi * 0.5 ** 3
     app = _app(tmp_path, rigid_body_entity("buoy", (0.0, 0.2, 0.0), scale=(1.0, 1.0, 1.0), shape="sphere",
-                               mass=density * 1000.0 * volume))
+                                           mass=density * 1000.0 * volume))
     buoy = _entity(app, "buoy")
     app.step(600)
     lo, hi = 0.0, 2.0 * r  # the draft d by bisection
@@ -91,7 +91,7 @@ def test_a_body_denser_than_water_sinks_to_the_floor(tmp_path):
 
 def test_a_tilted_box_rights_itself(tmp_path):
     app = _app(tmp_path, rigid_body_entity("raft", (0.0, 0.0, 0.0), scale=(1.2, 0.4, 1.0), rotation=(0.0, 0.0, 25.0),
-                               mass=200.0))
+                                           mass=200.0))
     raft = _entity(app, "raft")
     app.step(1)
     assert _roll_pitch(app.world.get(raft, Transform).rotation) > 20.0
@@ -106,7 +106,7 @@ def test_a_box_floating_tilted_onto_an_edge_stops_bobbing(tmp_path, roll):
     with the motion and it bobbed 0.24 m (45°) or 0.42 m (20°) peak to peak for good at α = 1."""
     water = "resolution = [26, 26]\nspacing = 0.4\nwave_speed = 1.5\noutline_constant = 1.0"
     app = _app(tmp_path, rigid_body_entity("crate", (0.0, 0.3, 0.0), scale=(1.0, 1.0, 1.0), rotation=(0.0, 0.0, roll),
-                               mass=250.0), water)
+                                           mass=250.0), water)
     crate = _entity(app, "crate")
     app.step(12 * 60)
     heights = []
@@ -126,8 +126,8 @@ def test_a_script_impulse_changes_the_velocity_by_j_over_m(tmp_path):
 
 
 def test_an_impact_event_pushes_and_spins_the_body(tmp_path):
-    app = _app(tmp_path, rigid_body_entity("crate", (0.0, 30.0, 0.0), scale=(1.0, 1.0, 1.0), mass=60.0, linear_damping=0.0,
-                               angular_damping=0.0, gravity=0.0))
+    app = _app(tmp_path, rigid_body_entity("crate", (0.0, 30.0, 0.0), scale=(1.0, 1.0, 1.0), mass=60.0,
+                                           linear_damping=0.0, angular_damping=0.0, gravity=0.0))
     crate = _entity(app, "crate")
     app.world.events.send(Impact(target=crate, point=(0.5, 30.0, 0.0), impulse=(0.0, 0.0, 12.0)))
     app.step(1)
@@ -200,7 +200,7 @@ def test_spin_and_speed_stay_finite_and_limited_whatever_a_script_gives_a_body(t
     """An asymmetric box spun at 5000 rad/s (explicit gyroscopic term: it blew up to NaN and crashed the water's
     rasterisation of the body) or kicked with an overflowing impulse keeps a finite state within its limits."""
     app = _app(tmp_path, rigid_body_entity("crate", (0.2, 0.2, -0.1), scale=(1.0, 0.3, 0.6), mass=100.0,
-                               max_angular_speed=1000.0))
+                                           max_angular_speed=1000.0))
     crate = _entity(app, "crate")
     state = app.world.get(crate, RigidBodyState)
     state.angular_velocity = np.array([spin, 0.3 * spin, 0.1 * spin])
@@ -242,7 +242,7 @@ def test_the_limit_scales_a_finite_velocity_too_long_to_square_instead_of_zeroin
 
 def test_a_contact_cannot_leave_the_spin_above_its_limit(tmp_path):
     app = _app(tmp_path, rigid_body_entity("crate", (0.2, -0.3, -0.1), rotation=(35.0, 10.0, 20.0), mass=900.0,
-                               velocity=[0.0, -5.0, 0.0], max_angular_speed=0.5))
+                                           velocity=[0.0, -5.0, 0.0], max_angular_speed=0.5))
     crate = _entity(app, "crate")
     for _ in range(30):
         app.step(1)
