@@ -3,16 +3,24 @@ PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
+KERNELS := $(VENV)/.kernels
+# the scenes whose runs compile every kernel the demo and the tests use (engine/warm.py)
+WARM_SCENES := $(wildcard configs/scenes/*_showcase.toml) configs/scenes/demo.toml
 
 .PHONY: demo test bench setup gl-deps clean
 
-setup: $(STAMP) gl-deps
+setup: $(STAMP) gl-deps $(KERNELS)
 
 $(STAMP): pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e ".[dev,bench]"
 	@touch $(STAMP)
+
+# The effects' compiled kernels, ahead of the first run and on every core (numba caches them beside the sources):
+# about a minute and a half on a fresh 2-core machine, seconds afterwards; again after a source changes.
+$(KERNELS): $(STAMP) $(wildcard engine/*.py systems/*/*.py) | gl-deps
+	$(PY) -m engine warm $(WARM_SCENES) && touch $@ || echo "kernel warm-up incomplete: kernels compile on first use"
 
 # Headless OpenGL needs Mesa's EGL; install it when missing and we are root, else say how.
 gl-deps:

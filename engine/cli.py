@@ -1,4 +1,4 @@
-"""Command line: ``python -m engine run|validate|schema|graph``."""
+"""Command line: ``python -m engine run|validate|schema|docs|gallery|graph|warm``."""
 
 from __future__ import annotations
 
@@ -69,6 +69,12 @@ def main(argv: list[str] | None = None) -> int:
     gr.add_argument("--dot", action="store_true", help="Graphviz format (culled passes dashed)")
     gr.add_argument("--out", type=Path, help="write to a file instead of stdout")
 
+    warm = sub.add_parser("warm", help="compile the kernels the scenes use, in parallel processes (first run)")
+    warm.add_argument("scenes", nargs="+", type=Path)
+    warm.add_argument("--jobs", type=_int_in(1, 256), default=None, help="processes at once (default: the cores)")
+    warm.add_argument("--steps", type=_int_in(1, 10**6), default=90, help="ticks per scene (default 90)")
+    warm.add_argument("--no-render", action="store_true", help="simulate only (no GL; render kernels not compiled)")
+
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     try:
@@ -90,6 +96,10 @@ def main(argv: list[str] | None = None) -> int:
             from engine.gallery import gallery_command
 
             return gallery_command(args)
+        if args.command == "warm":
+            from engine.warm import warm_command
+
+            return warm_command(args.scenes, args.jobs, args.steps, headless=not args.no_render)
         if args.command == "graph":
             from engine.runner import graph_command
 

@@ -10,14 +10,18 @@ cells or particles runs at C speed and with no temporaries.
 :func:`kernel` is the one way the engine compiles a function, with the same settings everywhere:
 
 - ``cache=True``: the machine code is written beside the module (``__pycache__``) and reused by later processes,
-  so only the first run on a machine pays the compile (a fraction of a second for a small kernel, tens of seconds
-  for the water's whole outline step or the smoke's MGPCG solve; about two minutes for all the effects'
-  kernels).
+  so only the first run on a machine pays the compile (a fraction of a second for a small kernel, up to about
+  eight seconds for the largest, the height-field ray march and the water's outline step; about two and a half
+  minutes of one core for all the effects' kernels).
 - ``fastmath=False``: IEEE arithmetic in the order written.  LLVM then may not reassociate sums or fuse
   multiply-adds, so a kernel gives the same bits in every run and process, like numpy's ``+ - * /``.  Keep
   transcendental functions in float64, as everywhere (``docs/`` and the conventions explain why).
 - ``error_model="numpy"``: division by zero gives inf/nan as in numpy instead of raising.
 - ``nogil=True``: a kernel releases the GIL while it runs.
+
+The cache is read and written under a lock file (:class:`LockedCache`), so several processes may compile at once:
+``python -m engine warm`` (``make test`` and ``make demo`` run it) compiles every kernel the scenes use on all
+cores, before the first run needs them.
 
 ``NUMBA_DISABLE_JIT=1`` (numba's own switch) runs every kernel as plain Python, for a debugger or a traceback
 with line numbers; results are the same, only slow.
@@ -25,14 +29,25 @@ with line numbers; results are the same, only slow.
 
 from __future__ import annotations
 
-from typing import Any, Callable, TypeVar
+import contextlib
+import os
+from typing import Any, Callable, Iterator, TypeVar
 
 import numba
 import numpy as np
+from numba.core.caching import FunctionCache
+
+try:
+    import fcntl
+except ImportError:  # Windows: no advisory locks; `python -m engine warm` then compiles in one process
+    fcntl = None
 
 F = TypeVar("F", bound=Callable[..., Any])
 
 OPTIONS: dict[str, Any] = {"cache": True, "fastmath": False, "error_model": "numpy", "nogil": True}
+
+LOCK_NAME = ".ecsfx-kernels.lock"
+CAN_LOCK = fcntl is not None
 
 
 def kernel(fn: F | None = None, **options: Any) -> Any:
@@ -44,8 +59,56 @@ def kernel(fn: F | None = None, **options: Any) -> Any:
     """
     settings = {**OPTIONS, **options}
     if fn is None:
-        return lambda f: numba.njit(**settings)(f)
-    return numba.njit(**settings)(fn)
+        return lambda f: _compile(f, settings)
+    return _compile(fn, settings)
+
+
+def _compile(fn: Callable[..., Any], settings: dict[str, Any]) -> Any:
+    dispatcher = numba.njit(**settings)(fn)
+    if settings.get("cache") and type(getattr(dispatcher, "_cache", None)) is FunctionCache:
+        dispatcher._cache = LockedCache(dispatcher.py_func)
+    return dispatcher
+
+
+class LockedCache(FunctionCache):
+    """numba's per-function disk cache, read and written under a lock file in its folder.
+
+    numba saves a new overload by reading the function's index, adding the entry and writing the index and a data
+    file numbered after the entries it saw.  Two processes compiling different signatures of one function at the
+    same time (a helper such as :func:`pairwise_sum`, compiled for each caller's argument types) would both take
+    number 1: the index of one would then point at the other's machine code.  Saving under an exclusive lock and
+    loading under a shared one makes the read-modify-write whole, so kernels may compile in several processes at
+    once (``python -m engine warm``, two test runs, a demo beside a test).  Without ``fcntl`` (Windows) nothing is
+    locked, as in numba itself.
+    """
+
+    def load_overload(self, sig: Any, target_context: Any) -> Any:
+        if not os.path.isdir(self.cache_path):  # nothing saved yet: nothing to lock
+            return super().load_overload(sig, target_context)
+        with _locked(self.cache_path, shared=True):
+            return super().load_overload(sig, target_context)
+
+    def save_overload(self, sig: Any, data: Any) -> None:
+        self._impl.locator.ensure_cache_path()
+        with _locked(self.cache_path, shared=False):
+            super().save_overload(sig, data)
+
+
+@contextlib.contextmanager
+def _locked(folder: str, shared: bool) -> Iterator[None]:
+    if fcntl is None:
+        yield
+        return
+    try:
+        fd = os.open(os.path.join(folder, LOCK_NAME), os.O_RDWR | os.O_CREAT, 0o666)
+    except OSError:  # a read-only cache folder: numba itself then only loads
+        yield
+        return
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH if shared else fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)  # closing the descriptor releases the lock
 
 
 # --------------------------------------------------------------------------------------------- summation
