@@ -8,6 +8,7 @@ takes N points or rays at once and returns world-space results. Signed distances
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Literal, get_args
 
@@ -198,7 +199,19 @@ class Collider:
             return np.linalg.norm(p, axis=-1) - self._sphere_radius(transform)
         if self.shape == "plane":
             return dot(p, self.normal) - self.offset
-        return p[:, 1] - self.heightfield.height_at(p[:, 0], p[:, 2])
+        return self._heightfield_gap(p)
+
+    def _heightfield_gap(self, p: F64) -> F64:
+        """y − h(x, z) of local points p: compiled (:func:`_heightfield_gap_kernel`, the same bits) for float64
+        heights without NaN x or z; otherwise by HeightField.height_at, the numpy reference, as it always was (its
+        indexing fails on NaN)."""
+        field_ = self.heightfield
+        if field_.heights.dtype == np.float64:
+            gap, done = _heightfield_gap_kernel(np.ascontiguousarray(p), np.ascontiguousarray(field_.heights),
+                                                float(field_.origin[0]), float(field_.origin[1]), float(field_.spacing))
+            if done:
+                return gap
+        return p[:, 1] - field_.height_at(p[:, 0], p[:, 2])
 
     def _local_normal(self, p: F64, transform: Transform) -> F64:
         """The normal of :meth:`_local_distance` alone."""
@@ -278,27 +291,36 @@ class Collider:
         x/z footprint × [min h, max h]) and to [0, max_t] (:meth:`_heightfield_interval`); that interval is sampled
         at most every spacing/2 of horizontal travel, the first sign change of f (above → below) is bracketed,
         then refined (Illinois false position, ``_refine_crossing``). One ray at a time in
-        :func:`_heightfield_march_kernel`; :meth:`_ray_heightfield_numpy` is the numpy reference (the same bits).
-        Crossings thinner than half a cell may be missed.
+        :func:`_heightfield_interval_kernel` and :func:`_heightfield_march_kernel`; :meth:`_ray_heightfield_numpy`
+        is the numpy reference (the same bits). Crossings thinner than half a cell may be missed.
         """
         field_ = self.heightfield
-        t_start, t_end, active, steps = self._heightfield_interval(o, d, max_t)
+        o, d = np.ascontiguousarray(o), np.ascontiguousarray(d)
+        t_start, t_end, active, longest = _heightfield_interval_kernel(o, d, *self._heightfield_box(), float(max_t))
         (x_lo, x_hi), (z_lo, z_hi) = field_.bounds()
         return _heightfield_march_kernel(
-            np.ascontiguousarray(o), np.ascontiguousarray(d), t_start, t_end, active, steps,
+            o, d, t_start, t_end, active, self._heightfield_steps(longest),
             np.ascontiguousarray(field_.heights, dtype=np.float64), float(field_.origin[0]), float(field_.origin[1]),
             float(field_.spacing), x_lo, x_hi, z_lo, z_hi)
+
+    def _heightfield_box(self) -> tuple[F64, F64]:
+        """The field's bounding box (lo, hi): its x/z footprint × [min h, max h], grown vertically by a pad so a
+        flat field still brackets its crossing."""
+        field_ = self.heightfield
+        (x_lo, x_hi), (z_lo, z_hi) = field_.bounds()
+        h_min, h_max = field_.height_range
+        pad = 1e-6 * (field_.spacing + h_max - h_min)
+        return np.array([x_lo, h_min - pad, z_lo]), np.array([x_hi, h_max + pad, z_hi])
+
+    def _heightfield_steps(self, longest: float) -> int:
+        """The march's sample count: one every spacing/2 of the longest horizontal travel, and the start."""
+        return int(np.ceil(longest / (0.5 * self.heightfield.spacing))) + 1
 
     def _heightfield_interval(self, o: F64, d: F64, max_t: float) -> tuple[F64, F64, NDArray[np.bool_], int]:
         """Each ray's [t_start, t_end] inside the field's bounding box and [0, max_t], whether it is non-empty
         (and the ray has a direction), and the march's sample count (every spacing/2 of the longest horizontal
-        travel)."""
-        field_ = self.heightfield
-        (x_lo, x_hi), (z_lo, z_hi) = field_.bounds()
-        h_min, h_max = field_.height_range
-        pad = 1e-6 * (field_.spacing + h_max - h_min)  # so a flat field still brackets its crossing
-        lo = np.array([x_lo, h_min - pad, z_lo])
-        hi = np.array([x_hi, h_max + pad, z_hi])
+        travel). The numpy reference of :func:`_heightfield_interval_kernel`."""
+        lo, hi = self._heightfield_box()
         parallel = d == 0.0
         with np.errstate(divide="ignore", invalid="ignore"):
             inv = 1.0 / np.where(parallel, 1.0, d)
@@ -310,8 +332,7 @@ class Collider:
         t_end = np.minimum(t_hi.min(axis=-1), max_t)
         active = (t_start <= t_end) & (d != 0.0).any(axis=-1)  # a ray without direction meets nothing it is not in
         horizontal = np.hypot(d[:, 0], d[:, 2]) * np.where(active, t_end - t_start, 0.0)
-        steps = int(np.ceil(np.max(horizontal, initial=0.0) / (0.5 * field_.spacing))) + 1
-        return t_start, t_end, active, steps
+        return t_start, t_end, active, self._heightfield_steps(np.max(horizontal, initial=0.0))
 
     def _ray_heightfield_numpy(self, o: F64, d: F64, transform: Transform, max_t: float) -> RayHits:
         """:meth:`_ray_heightfield` in numpy, loops over march chunks and refinement iterations, each vectorized
@@ -420,6 +441,20 @@ def _field_height(heights: F64, ox: float, oz: float, spacing: float, x: float, 
     return top + tz * (bottom - top)
 
 
+@kernel
+def _heightfield_gap_kernel(p: F64, heights: F64, ox: float, oz: float, spacing: float) -> tuple[F64, bool]:
+    """y − HeightField.height_at(x, z) of every point, with its operations (:func:`_field_height`), and True; False
+    as soon as a point's x or z is NaN (the gaps then unfinished), where height_at's indexing would fail."""
+    n = p.shape[0]
+    gap = np.empty(n)
+    for i in range(n):  # compiled loop over points
+        x, z = p[i, 0], p[i, 2]
+        if x != x or z != z:
+            return gap, False
+        gap[i] = p[i, 1] - _field_height(heights, ox, oz, spacing, x, z)
+    return gap, True
+
+
 @kernel(inline="always")
 def _ray_height_gap(o: F64, d: F64, i: int, t: float, heights: F64, ox: float, oz: float, spacing: float) -> float:
     """f(t) = y(t) - h(x(t), z(t)) of ray i."""
@@ -442,6 +477,41 @@ def _field_normal(heights: F64, ox: float, oz: float, spacing: float, x_lo: floa
     nx, nz = -dhdx, -dhdz
     norm = np.sqrt(nx * nx + 1.0 + nz * nz)
     return nx / norm, 1.0 / norm, nz / norm
+
+
+@kernel(inline="always")
+def _slab_interval(o: float, d: float, lo: float, hi: float) -> tuple[float, float]:
+    """One axis of Collider._heightfield_interval: the ray's entry and exit t of lo <= x <= hi (±inf when it runs
+    parallel, inside the slab or not), in its operations (1/d, then (lo − o)·inv, (hi − o)·inv)."""
+    if d == 0.0:
+        if o >= lo and o <= hi:
+            return -np.inf, np.inf
+        return np.inf, -np.inf
+    inv = 1.0 / d
+    t1, t2 = (lo - o) * inv, (hi - o) * inv
+    return _min(t1, t2), _max(t1, t2)
+
+
+@kernel
+def _heightfield_interval_kernel(o: F64, d: F64, lo: F64, hi: F64, max_t: float
+                                 ) -> tuple[F64, F64, NDArray[np.bool_], float]:
+    """Collider._heightfield_interval for every ray in one pass: [t_start, t_end] inside the box lo..hi and
+    [0, max_t], whether it is non-empty (and the ray has a direction), and the longest horizontal travel over the
+    active rays (at least 0; NaN when any ray's is NaN, as numpy's max). Its axis reductions run in their order,
+    0, 1, 2, with numpy's max/min semantics (:func:`_max`, :func:`_min`), so the values are the same bits."""
+    n = o.shape[0]
+    t_start, t_end, active = np.empty(n), np.empty(n), np.empty(n, np.bool_)
+    longest = 0.0
+    for i in range(n):  # compiled loop over rays
+        near0, far0 = _slab_interval(o[i, 0], d[i, 0], lo[0], hi[0])
+        near1, far1 = _slab_interval(o[i, 1], d[i, 1], lo[1], hi[1])
+        near2, far2 = _slab_interval(o[i, 2], d[i, 2], lo[2], hi[2])
+        start = _max(_max(_max(near0, near1), near2), 0.0)
+        end = _min(_min(_min(far0, far1), far2), max_t)
+        live = start <= end and (d[i, 0] != 0.0 or d[i, 1] != 0.0 or d[i, 2] != 0.0)
+        t_start[i], t_end[i], active[i] = start, end, live
+        longest = _max(longest, math.hypot(d[i, 0], d[i, 2]) * (end - start if live else 0.0))
+    return t_start, t_end, active, longest
 
 
 @kernel

@@ -95,7 +95,7 @@ def collider_bounds(collider: Collider, transform: Transform) -> tuple[F64 | Non
         return transform.position - r, transform.position + r
     if collider.shape == "heightfield" and quat_is_identity(transform.rotation):
         # Solid below the surface; outside its footprint the field is extruded, so only the top is bounded.
-        top = collider.heightfield.height_range[1] + transform.position[1]
+        top = float(collider.heightfield.heights.max()) + transform.position[1]  # height_range[1], without its min
         return np.full(3, -np.inf), np.array([np.inf, top, np.inf])
     return None, None
 
@@ -157,23 +157,18 @@ def sweep(p0: F64, p1: F64, colliders: list[ColliderEntry],
     """Ray-cast the segments p0 → p1 against every collider; keep the first solid hit per segment.
 
     ``allowed`` (segments, colliders) says which segment may hit which collider (None: every one), so the
-    segments of several emitters are cast together: one ray cast per collider.
+    segments of several emitters are cast together: one ray cast per collider that some segment can reach
+    (:func:`sweep_candidates`), in collider order.
     """
     n = len(p0)
     best_t = np.full(n, np.inf)
     best_c = np.full(n, -1, dtype=np.int64)
     best_n = np.zeros((n, 3))
     trigger_hits = []
-    for index, entry in enumerate(colliders):  # loop over colliders, vectorized over particles
-        candidate = np.ones(n, dtype=bool) if allowed is None else allowed[:, index].copy()
-        if entry.lo is not None:  # the segment's bounding box overlaps the collider's, axis by axis
-            for axis in range(3):  # loop over the three axes
-                a, b = p0[:, axis], p1[:, axis]
-                candidate &= (a >= entry.lo[axis]) | (b >= entry.lo[axis])
-                candidate &= (a <= entry.hi[axis]) | (b <= entry.hi[axis])
-        rows = np.flatnonzero(candidate)
-        if rows.size == 0:
-            continue
+    candidates = sweep_candidates(p0, p1, colliders, allowed)
+    for index in np.flatnonzero(candidates.any(axis=1)).tolist():  # loop over reachable colliders, ascending
+        entry = colliders[index]
+        rows = np.flatnonzero(candidates[index])
         origin = _take_rows(p0, rows)
         hit, t, normal = entry.collider.ray_cast(origin, _take_rows(p1, rows) - origin, entry.transform, max_t=1.0)
         if entry.collider.is_trigger:
@@ -191,6 +186,36 @@ def sweep(p0: F64, p1: F64, colliders: list[ColliderEntry],
         if rows.size:
             triggers.append((index, rows, p0[rows] + t[:, None] * (p1[rows] - p0[rows])))
     return SweepResult(best_t, best_c, best_n, triggers)
+
+
+def sweep_candidates(p0: F64, p1: F64, colliders: list[ColliderEntry],
+                     allowed: NDArray[np.bool_] | None = None) -> NDArray[np.bool_]:
+    """Which segments p0 → p1 each collider must be ray-cast against: (colliders, segments), C-contiguous.
+
+    A segment is a candidate of a collider it is ``allowed`` to hit (None: every one) when the collider is
+    unbounded, or when the segment's bounding box meets the collider's on every axis: some end ≥ lo and some
+    end ≤ hi. All bounded colliders are tested in one broadcast comparison; ``np.fmax``/``np.fmin`` of the ends
+    keep the per-end test's answer when one end is NaN (the other end decides; two NaN ends meet no box).
+    """
+    n, m = len(p0), len(colliders)
+    if allowed is None:
+        candidates = np.ones((m, n), dtype=bool)
+    else:
+        candidates = np.array(allowed.T, dtype=bool, order="C")
+    bounded = [index for index, entry in enumerate(colliders) if entry.lo is not None]
+    if not bounded or n == 0:
+        return candidates
+    lo = np.array([colliders[index].lo for index in bounded]).T[:, :, None]  # (axis, collider, 1)
+    hi = np.array([colliders[index].hi for index in bounded]).T[:, :, None]
+    # (axis, collider, segment), segments contiguous: numpy's broadcast is several times slower over (segment, axis)
+    reach_up = np.fmax(p0.T, p1.T, order="C")[:, None, :] >= lo
+    reach_down = np.fmin(p0.T, p1.T, order="C")[:, None, :] <= hi
+    overlap = reach_up[0] & reach_up[1] & reach_up[2] & reach_down[0] & reach_down[1] & reach_down[2]
+    if len(bounded) == m:
+        candidates &= overlap
+    else:
+        candidates[bounded] &= overlap
+    return candidates
 
 
 # ------------------------------------------------------------------------------------------------- the equations

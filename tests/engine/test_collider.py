@@ -352,6 +352,85 @@ def test_heightfield_ray_cast_kernel_matches_numpy_bit_for_bit():
     assert hits > 300  # the cases do hit (415 with this seed)
 
 
+def test_heightfield_interval_kernel_matches_numpy_bit_for_bit():
+    """The compiled clipping of rays to a field's box against the numpy reference, -0.0 and NaN included: rays
+    starting exactly on each face or corner (t = ±0 there), parallel inside and outside a slab, without
+    direction, with a subnormal direction, with NaN origins (inactive); the march's step count from the longest
+    horizontal travel; and both refuse a NaN or infinite direction alike (its travel is NaN)."""
+    from engine.collider import _heightfield_interval_kernel
+
+    rng = np.random.default_rng(17)
+    collider = Collider(shape="heightfield", heightfield=HeightField(heights=rng.uniform(-1.0, 2.0, (6, 5)),
+                                                                    spacing=0.8, origin=[-1.5, -2.0]))
+    lo, hi = collider._heightfield_box()
+    n = 4000
+    o = rng.uniform(-4.0, 4.0, (n, 3))
+    d = rng.normal(size=(n, 3)) * rng.choice([0.1, 1.0, 10.0], (n, 1))
+    for axis in range(3):  # origins on the faces, going in and out
+        on = slice(200 * axis, 200 * axis + 200)
+        o[on, axis] = np.where(np.arange(200) % 2 == 0, lo[axis], hi[axis])
+        d[on.start: on.start + 50, axis] = 0.0  # ... and along them
+        d[on.start + 200 * 3: on.start + 200 * 3 + 60, axis] = 0.0  # parallel anywhere
+    d[1500:1520] = 0.0
+    d[1520:1540, 1] = 5e-324
+    o[1560:1580, 1] = np.nan
+    o[1580:1600] = np.abs(o[1580:1600]) * -0.0  # origin at -0.0
+    o[1600:1800] = np.where(rng.random((200, 3)) < 0.5, lo, hi)  # on the box's corners: ±0 on several axes
+    signed_zeros, actives = 0, []
+    for max_t in (np.inf, 2.5, 0.0, -0.0):
+        with np.errstate(invalid="ignore", over="ignore"):
+            want = collider._heightfield_interval(o, d, max_t)
+            t_start, t_end, active, longest = _heightfield_interval_kernel(o, d, lo, hi, max_t)
+            horizontal = np.hypot(d[:, 0], d[:, 2]) * np.where(want[2], want[1] - want[0], 0.0)
+        for got, ref in zip((t_start, t_end, active), want[:3]):
+            _same_bits(got, ref)
+        _same_bits(np.float64(longest), np.max(horizontal, initial=0.0))
+        assert collider._heightfield_steps(longest) == want[3]
+        live = want[2]
+        signed_zeros += int(np.sum(np.signbit(t_end[live]) & (t_end[live] == 0.0)))
+        actives.append(int(live.sum()))
+    assert signed_zeros > 0  # -0.0 did occur where it is kept
+    assert actives[0] > 500 and actives[2] > 0
+    for bad in (np.nan, np.inf):
+        d[7, 0] = bad
+        with pytest.raises(ValueError, match="NaN"), np.errstate(invalid="ignore", over="ignore"):
+            collider._heightfield_interval(o, d, 1.0)
+        with pytest.raises(ValueError, match="NaN"):
+            collider._heightfield_steps(_heightfield_interval_kernel(o, d, lo, hi, 1.0)[3])
+
+
+def test_heightfield_gap_kernel_matches_height_at_bit_for_bit():
+    """y − h(x, z) (the signed distance, the ray casts' inside test) compiled against HeightField.height_at: points
+    inside and outside the footprint, on grid nodes and borders, at ±0, ±inf and huge coordinates; NaN and
+    float32 heights take height_at itself (NaN still fails there as it did)."""
+    from engine.heightfield import midpoint_displacement
+
+    rng = np.random.default_rng(23)
+    field = HeightField(heights=midpoint_displacement(4, 0.6, 3.0, np.random.default_rng(2)), spacing=0.6,
+                        origin=[-0.0, -4.2])
+    collider = Collider(shape="heightfield", heightfield=field)
+    (x_lo, x_hi), (z_lo, z_hi) = field.bounds()
+    n = 3000
+    p = rng.uniform(-12.0, 12.0, (n, 3))
+    p[:500, 0] = x_lo + field.spacing * rng.integers(-2, 20, 500)  # on grid lines and nodes
+    p[:500, 2] = z_lo + field.spacing * rng.integers(-2, 20, 500)
+    p[500:520, 0] = -0.0
+    p[520:540, 0], p[540:560, 2] = x_hi, z_hi
+    p[560:580, 0], p[580:600, 2] = np.inf, -np.inf
+    p[600:620, [0, 2]] = [1e300, -1e300]
+    want = p[:, 1] - field.height_at(p[:, 0], p[:, 2])
+    _same_bits(collider._heightfield_gap(p), want)
+    finite = np.isfinite(p).all(axis=1)  # (the identity rotation of an infinite point gives NaN)
+    _same_bits(collider.signed_distance(p[finite], Transform()), want[finite])
+    single = Collider(shape="heightfield", heightfield=HeightField(heights=field.heights.astype(np.float32),
+                                                                    spacing=0.6, origin=[-0.0, -4.2]))
+    single.heightfield.heights = field.heights.astype(np.float32)  # float32 heights: height_at's own arithmetic
+    _same_bits(single._heightfield_gap(p), p[:, 1] - single.heightfield.height_at(p[:, 0], p[:, 2]))
+    p[1234, 2] = np.nan
+    with pytest.raises(IndexError), np.errstate(invalid="ignore"):
+        collider._heightfield_gap(p)
+
+
 @pytest.mark.parametrize("rotated", [False, True])
 @pytest.mark.parametrize("shape", ["box", "sphere", "plane", "heightfield"])
 def test_rays_that_start_inside_hit_at_zero_with_the_query_normal(shape, rotated):

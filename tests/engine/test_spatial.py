@@ -41,6 +41,22 @@ def test_matrix_is_a_proper_rotation(rng):
     np.testing.assert_allclose(np.linalg.det(m), 1.0, atol=1e-12)
 
 
+def test_one_quaternion_matrix_is_the_stacked_one_bit_for_bit(rng):
+    """One quaternion takes a Python-float path: it must give the array path's bits, for unit, non-unit, signed
+    zero, tiny, huge and non-finite quaternions alike (the zero quaternion keeps numpy's inf and warning)."""
+    qs = np.concatenate([_random_quats(rng, 200), rng.normal(size=(200, 4)) * rng.choice([1e-160, 1e-3, 7.0, 1e150],
+                                                                                        (200, 1)),
+                         [[1.0, 0.0, 0.0, 0.0], [-0.0, 0.0, -0.0, 1.0], [1.0, -0.0, 0.0, -0.0],
+                          [np.nan, 0.0, 1.0, 0.0], [np.inf, 0.0, 0.0, 1.0], [1e200, 1e200, 0.0, 0.0]]])
+    with np.errstate(over="ignore", invalid="ignore"):  # the huge and non-finite rows
+        stacked = quat_to_matrix(qs)
+    for q, want in zip(qs, stacked):
+        with np.errstate(over="ignore", invalid="ignore"):
+            assert quat_to_matrix(q).tobytes() == want.tobytes()
+    with pytest.warns(RuntimeWarning):
+        assert quat_to_matrix(np.zeros(4)).tobytes() == quat_to_matrix(np.zeros((1, 4)))[0].tobytes()
+
+
 def test_axis_angle_known_rotations():
     q = quat_from_axis_angle([0.0, 0.0, 2.0], np.pi / 2)  # axis need not be unit
     np.testing.assert_allclose(quat_rotate(q, [1.0, 0.0, 0.0]), [0.0, 1.0, 0.0], atol=1e-15)
