@@ -132,7 +132,20 @@ class Collider:
         if self.shape == "box":
             return _box_ray_cast_kernel(
                 np.ascontiguousarray(origins), np.ascontiguousarray(dirs), *self._box_frame(transform), float(max_t))
+        if self.shape == "heightfield":  # a ray with a NaN or infinite coordinate misses, as it does the others
+            finite = np.isfinite(origins).all(axis=1) & np.isfinite(dirs).all(axis=1)
+            if not finite.all():
+                return self._ray_cast_rows(origins, dirs, transform, max_t, np.flatnonzero(finite))
         return self._ray_cast_numpy(origins, dirs, transform, max_t)
+
+    def _ray_cast_rows(self, origins: F64, dirs: F64, transform: Transform, max_t: float,
+                       rows: NDArray[np.int64]) -> RayHits:
+        """:meth:`ray_cast` of the given rows; the others miss (hit False, t = inf, normal 0)."""
+        n = len(origins)
+        hit, t, normal = np.zeros(n, dtype=bool), np.full(n, np.inf), np.zeros((n, 3))
+        if rows.size:
+            hit[rows], t[rows], normal[rows] = self._ray_cast_numpy(origins[rows], dirs[rows], transform, max_t)
+        return hit, t, normal
 
     def _ray_cast_numpy(self, origins: F64, dirs: F64, transform: Transform, max_t: float = np.inf) -> RayHits:
         """:meth:`ray_cast` in numpy, every shape (the reference of the box kernel).

@@ -456,3 +456,21 @@ def test_rays_that_start_inside_hit_at_zero_with_the_query_normal(shape, rotated
     assert np.isinf(t[~hit]).all()
     for a, b in zip((hit, t, normal), collider._ray_cast_numpy(origins, dirs, transform, max_t=0.5)):
         np.testing.assert_array_equal(a, b)
+
+
+def test_heightfield_rays_with_nan_or_infinite_coordinates_miss_and_leave_the_others_alone():
+    # A NaN origin used to index the height grid out of range and a NaN or infinite direction to turn the march's
+    # step count into int(nan): a script's bad ray crashed the cast of every ray with it. Box, sphere and plane
+    # already answered such rays with a miss.
+    collider = Collider(shape="heightfield", heightfield=_tilted_field())
+    good_o, good_d = [[0.3, 5.0, -0.2], [1.0, 4.0, 1.0]], [[0.1, -1.0, 0.05], [0.0, -1.0, 0.0]]
+    alone = collider.ray_cast(good_o, good_d, Transform())
+    bad_o = [[np.nan, 5.0, 0.0], [0.0, 5.0, 0.0], [np.inf, 5.0, 0.0]]
+    bad_d = [[0.0, -1.0, 0.0], [np.nan, -1.0, 0.0], [0.0, -1.0, 0.0]]
+    hit, t, normal = collider.ray_cast(good_o[:1] + bad_o + good_o[1:], good_d[:1] + bad_d + good_d[1:], Transform())
+    assert alone[0].all()
+    assert hit.tolist() == [True, False, False, False, True]
+    assert np.isinf(t[1:4]).all() and not normal[1:4].any()
+    assert np.array_equal(t[[0, 4]], alone[1]) and np.array_equal(normal[[0, 4]], alone[2])
+    hit, t, _ = collider.ray_cast([[0.0, 5.0, 0.0]], [[np.inf, -1.0, 0.0]], Transform())
+    assert not hit[0] and np.isinf(t[0])
