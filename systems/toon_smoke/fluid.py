@@ -33,6 +33,7 @@ __all__ = [
     "divergence",
     "enforce_solid_faces",
     "project",
+    "project_numpy",
     "vorticity_force",
 ]
 
@@ -261,10 +262,10 @@ def body_forces(u: F32, v: F32, w: F32, temperature: F32, density: F32, buoyancy
     :func:`body_forces_numpy`, its reference in the tests."""
     from systems.toon_smoke.kernels import body_forces_kernel
 
-    use_up = np.array([abs(up[a]) > 1e-12 for a in range(3)])
+    up = np.asarray(up, np.float64)
     body_forces_kernel(u, v, w, _f32c(temperature), _f32c(density), np.float32(buoyancy), np.float32(weight),
-                       np.asarray(up, np.float64).astype(np.float32), use_up, confinement > 0.0,
-                       np.float32(confinement * h), np.float32(1.0 / h), np.float32(dt))
+                       up.astype(np.float32), np.abs(up) > 1e-12, confinement > 0.0, np.float32(confinement * h),
+                       np.float32(1.0 / h), np.float32(dt))
 
 
 def body_forces_numpy(u: F32, v: F32, w: F32, temperature: F32, density: F32, buoyancy: float, weight: float,
@@ -300,8 +301,27 @@ def project(u: F32, v: F32, w: F32, h: float, hierarchy: poisson.PoissonHierarch
     Solves M φ = h·(target − ∇·u) with :func:`poisson.solve` (MGPCG), then u_f −= A_f (φ_nb − φ_c) on every open
     face.  ``target`` is an optional prescribed divergence (explosions, Feldman et al. 2003), 0 elsewhere.
     Returns (φ, max|∇·u − target| before, the same after, iterations); the "after" value is measured from the
-    updated velocities, not taken from the solver.
+    updated velocities, not taken from the solver.  Around the solve, one compiled call before (the divergence,
+    its largest value and the right-hand side: :func:`systems.toon_smoke.kernels.divergence_rhs_kernel`) and one
+    after (the gradient update and the divergence again: ``pressure_update_kernel``); the same bits as
+    :func:`project_numpy`, its reference in the tests.
     """
+    from systems.toon_smoke.kernels import divergence_rhs_kernel, pressure_update_kernel
+
+    level = hierarchy.levels[0]
+    h32 = np.float32(h)
+    has_target = target is not None
+    target = _f32c(target) if has_target else level.diag  # a float32 (nx, ny, nz) stand-in, never read
+    rhs, div_before = divergence_rhs_kernel(u, v, w, h32, target, has_target, level.active)
+    phi, report = poisson.solve(hierarchy, rhs, pressure, tolerance, max_iterations)
+    ax, ay, az = level.faces
+    div_after = pressure_update_kernel(u, v, w, phi, ax, ay, az, h32, target, has_target, level.active)
+    return phi, float(div_before), float(div_after), report.iterations
+
+
+def project_numpy(u: F32, v: F32, w: F32, h: float, hierarchy: poisson.PoissonHierarchy, pressure: F32,
+                  tolerance: float, max_iterations: int, target: F32 | None = None) -> tuple[F32, float, float, int]:
+    """:func:`project` as whole-array numpy expressions around the solve (its reference)."""
     level = hierarchy.levels[0]
     fluid = level.active
     before = divergence(u, v, w, h)

@@ -730,3 +730,148 @@ def mgpcg_kernel(b, x0, warm, active, singular, tolerance, max_iterations, buffe
             p[c] = p[c] * beta + z[c]
         rz = rz_new
     return x.reshape(shape), iterations, res, b_max
+
+
+# --- The projection around the solve (Stam 1999 §2.5; seeds/002 §3.1) ---------------------------------------------
+#
+# The numpy reference (:func:`systems.toon_smoke.fluid.project_numpy`) takes the divergence, the target's
+# difference, its largest value over the fluid and the right-hand side as whole-array expressions, then the
+# pressure gradient face by face, and the divergence again: some forty calls and a dozen temporaries per step on a
+# 16³ grid, more time than the solve's arithmetic.  The two kernels below do the same float32 operations per cell
+# or face, in numpy's order (each difference, then the sums left to right, the division by h, the target's
+# subtraction; the gradient's difference, its product with A_f, then the face's update), so the bits are the same.
+
+
+@kernel(inline="always")
+def _cell_divergence(u, v, w, i, j, k, h):  # pragma: no cover
+    """(∇·u) of cell (i, j, k) as ``fluid.divergence``: ((u₊ − u₋) + (v₊ − v₋)) + (w₊ − w₋), over h."""
+    flux = (u[i + 1, j, k] - u[i, j, k]) + (v[i, j + 1, k] - v[i, j, k])
+    return (flux + (w[i, j, k + 1] - w[i, j, k])) / h
+
+
+@kernel(inline="always")
+def _max_abs_divergence(u, v, w, h, target, has_target, active, rhs, write_rhs):  # pragma: no cover
+    """max |∇·u − target| over the active cells, 0 when there are none (``fluid._max_abs``: float32, a NaN wins);
+    with ``write_rhs``, also ``rhs`` = −(∇·u − target)·h on every cell."""
+    nx, ny, nz = active.shape
+    top = np.float32(0.0)
+    for i in range(nx):
+        for j in range(ny):
+            for k in range(nz):
+                d = _cell_divergence(u, v, w, i, j, k, h)
+                if has_target:
+                    d = d - target[i, j, k]
+                if write_rhs:
+                    rhs[i, j, k] = -d * h
+                if active[i, j, k]:
+                    a = abs(d)
+                    if a > top or a != a:
+                        top = a
+    return top
+
+
+@kernel
+def divergence_rhs_kernel(u, v, w, h, target, has_target, active):  # pragma: no cover
+    """Before the solve (``fluid.project_numpy``): b = −(∇·u − target)·h (float32, every cell) and
+    max |∇·u − target| over the active cells.  ``h`` is float32; ``target`` is read only with ``has_target``."""
+    rhs = np.empty(active.shape, np.float32)
+    top = _max_abs_divergence(u, v, w, h, target, has_target, active, rhs, True)
+    return rhs, top
+
+
+@kernel
+def pressure_update_kernel(u, v, w, phi, ax, ay, az, h, target, has_target, active):  # pragma: no cover
+    """After the solve (``fluid.project_numpy``), in place: u_f −= A_f (φ_hi − φ_lo) on every interior face,
+    −= A_f φ on the low border faces and += A_f φ on the high ones (the ghost holds φ = 0); then returns
+    max |∇·u − target| over the active cells, from the updated faces."""
+    nx, ny, nz = phi.shape
+    for i in range(nx + 1):
+        for j in range(ny):
+            for k in range(nz):
+                if i == 0:
+                    u[i, j, k] -= ax[i, j, k] * phi[0, j, k]
+                elif i == nx:
+                    u[i, j, k] += ax[i, j, k] * phi[nx - 1, j, k]
+                else:
+                    u[i, j, k] -= ax[i, j, k] * (phi[i, j, k] - phi[i - 1, j, k])
+    for i in range(nx):
+        for j in range(ny + 1):
+            for k in range(nz):
+                if j == 0:
+                    v[i, j, k] -= ay[i, j, k] * phi[i, 0, k]
+                elif j == ny:
+                    v[i, j, k] += ay[i, j, k] * phi[i, ny - 1, k]
+                else:
+                    v[i, j, k] -= ay[i, j, k] * (phi[i, j, k] - phi[i, j - 1, k])
+    for i in range(nx):
+        for j in range(ny):
+            for k in range(nz + 1):
+                if k == 0:
+                    w[i, j, k] -= az[i, j, k] * phi[i, j, 0]
+                elif k == nz:
+                    w[i, j, k] += az[i, j, k] * phi[i, j, nz - 1]
+                else:
+                    w[i, j, k] -= az[i, j, k] * (phi[i, j, k] - phi[i, j, k - 1])
+    return _max_abs_divergence(u, v, w, h, target, has_target, active, phi, False)
+
+
+# --- After the advection: the scalars' fade and clamp, the particles' rebirth (seeds/002 §3.1, §3.3) --------------
+
+
+@kernel
+def fade_and_clamp_kernel(density, temperature, fade_density, density_factor, fade_temperature,
+                          temperature_factor, fluid_weight, weighted, density_limit, temperature_limit
+                          ):  # pragma: no cover
+    """In place: ρ ·= its fade factor (with ``fade_density``), T ·= its own (with ``fade_temperature``), both ·= the
+    fluid weight (1 in fluid cells, 0 in solids; the numpy code's scalar 1 without ``weighted``), then the
+    minimum with the limit (a NaN stays NaN, as ``np.minimum``); float32, the order of ``simulate.scalar_step``'s
+    numpy reference."""
+    nx, ny, nz = density.shape
+    one = np.float32(1.0)
+    for i in range(nx):
+        for j in range(ny):
+            for k in range(nz):
+                weight = fluid_weight[i, j, k] if weighted else one
+                d = density[i, j, k]
+                if fade_density:
+                    d = d * density_factor
+                d = d * weight
+                density[i, j, k] = density_limit if d > density_limit else d
+                t = temperature[i, j, k]
+                if fade_temperature:
+                    t = t * temperature_factor
+                t = t * weight
+                temperature[i, j, k] = temperature_limit if t > temperature_limit else t
+
+
+@kernel
+def particle_rebirth_kernel(p, age, dt, half, solid, has_solid, h, factor, lifetime):  # pragma: no cover
+    """Which particles are reborn (``simulate.advect_particles``'s numpy reference): age += Δt (in place), then a
+    particle is reborn when it left the box (|p_a| > half_a on an axis), when the display cell it is in is solid
+    (``has_solid``; cell ⌊(p + half)/h · factor⌋ clamped to the grid) or when its age reached ``lifetime`` (> 0).
+    Returns (the flags, their count).  A NaN coordinate reads cell 0, as numpy's cast to an index does (x86)."""
+    n = p.shape[0]
+    reborn = np.zeros(n, np.bool_)
+    count = 0
+    for r in range(n):
+        age[r] += dt
+        out = abs(p[r, 0]) > half[0] or abs(p[r, 1]) > half[1] or abs(p[r, 2]) > half[2]
+        if has_solid and not out:  # inside the box: a finite cell index, clamped only by a rounding
+            i = _display_cell(p[r, 0], half[0], h, factor, solid.shape[0])
+            j = _display_cell(p[r, 1], half[1], h, factor, solid.shape[1])
+            k = _display_cell(p[r, 2], half[2], h, factor, solid.shape[2])
+            out = solid[i, j, k]
+        if lifetime > 0.0 and age[r] >= lifetime:
+            out = True
+        reborn[r] = out
+        count += out
+    return reborn, count
+
+
+@kernel(inline="always")
+def _display_cell(x, half, h, factor, n):  # pragma: no cover
+    """The display cell along one axis holding local coordinate x (``simulate._nearest`` of ``geo.to_cells``)."""
+    c = np.floor(((x + half) / h) * factor)
+    if c != c:
+        return 0
+    return min(max(int(c), 0), n - 1)

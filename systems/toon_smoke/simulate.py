@@ -18,6 +18,7 @@ instead of three times, and the picture is the same: it shows the state after th
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -99,7 +100,38 @@ def update_obstacles(world: World | None, entity: int, transform: Transform, cfg
 def _overlapping_colliders(world: World, entity: int, transform: Transform, cfg: ToonSmokeVolumeConfig) -> list:
     """Colliders that may reach into the volume (a cheap bounding test per collider entity, every step).
 
-    Lengths are engine.exact's ``length`` (√(d·d) summed in order, the same bits on every CPU)."""
+    Lengths are √(d·d) summed in order, as engine.exact's ``length``, in Python floats (the same IEEE operations on
+    the float64 positions, so the same bits, without a numpy call per product)."""
+    if not cfg.collide_with_colliders:
+        return []
+    reach = 0.5 * _length(*(float(e) for e in cfg.extent))
+    px, py, pz = transform.position.tolist()
+    found = []
+    for other, (t, collider) in world.query(Transform, Collider):
+        if other == entity or collider.is_trigger:
+            continue
+        shape = collider.shape
+        if shape == "sphere" or shape == "box":
+            qx, qy, qz = t.position.tolist()
+            gap = _length(qx - px, qy - py, qz - pz) - reach
+            sx, sy, sz = t.scale.tolist()
+            if shape == "sphere" and gap > collider.radius * _max_abs(sx, sy, sz):
+                continue
+            if shape == "box":
+                hx, hy, hz = collider.half_extents.tolist()
+                if gap > _length(hx * sx, hy * sy, hz * sz):
+                    continue
+        if shape == "heightfield":
+            top = float(t.position[1]) + float(collider.heightfield.heights.max())
+            if py - reach > top:
+                continue
+        found.append((other, t, collider))
+    return found
+
+
+def _overlapping_colliders_numpy(world: World, entity: int, transform: Transform, cfg: ToonSmokeVolumeConfig
+                                 ) -> list:
+    """:func:`_overlapping_colliders` with engine.exact's ``length`` on numpy vectors (its reference)."""
     if not cfg.collide_with_colliders:
         return []
     extent = np.asarray(cfg.extent, float)
@@ -122,6 +154,20 @@ def _overlapping_colliders(world: World, entity: int, transform: Transform, cfg:
                 continue
         found.append((other, t, collider))
     return found
+
+
+def _length(x: float, y: float, z: float) -> float:
+    """√((x·x + y·y) + z·z): engine.exact's ``length`` of one vector, in Python floats."""
+    return math.sqrt(x * x + y * y + z * z)
+
+
+def _max_abs(x: float, y: float, z: float) -> float:
+    """max(|x|, |y|, |z|) with a NaN winning, as ``np.max(np.abs(v))``."""
+    top = abs(x)
+    for value in (abs(y), abs(z)):
+        if value > top or value != value:
+            top = value
+    return top
 
 
 def _solid_mask(centres, transform: Transform, cfg: ToonSmokeVolumeConfig, colliders: list) -> np.ndarray:
@@ -203,13 +249,35 @@ def scalar_step(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, dt: float) ->
     if cfg.diffusion > 0.0:
         density = fluid.diffuse(density, cfg.diffusion, dt, geo.h, cfg.diffusion_iterations)
         temperature = fluid.diffuse(temperature, cfg.diffusion, dt, geo.h, cfg.diffusion_iterations)
+    state.density, state.temperature = fade_and_clamp(cfg, state, density, temperature, dt)
+
+
+def fade_and_clamp(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, density: np.ndarray,
+                   temperature: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """Fade ρ and T (dissipation, cooling), clear the solid cells, clamp to the limits: in place on the new fields,
+    one compiled pass (:func:`systems.toon_smoke.kernels.fade_and_clamp_kernel`); the same bits as
+    :func:`fade_and_clamp_numpy`, its reference in the tests."""
+    from systems.toon_smoke.kernels import fade_and_clamp_kernel
+
+    weight = state.hierarchy.fluid_weight if state.hierarchy is not None else None
+    fade_and_clamp_kernel(density, temperature, cfg.density_dissipation > 0.0,
+                          np.float32(1.0 / (1.0 + cfg.density_dissipation * dt)), cfg.temperature_cooling > 0.0,
+                          np.float32(1.0 / (1.0 + cfg.temperature_cooling * dt)),
+                          density if weight is None else weight, weight is not None,
+                          np.float32(cfg.density_limit), np.float32(cfg.temperature_limit))
+    return density, temperature
+
+
+def fade_and_clamp_numpy(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, density: np.ndarray,
+                         temperature: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`fade_and_clamp` in numpy (its reference); returns new arrays."""
     if cfg.density_dissipation > 0.0:
         density *= np.float32(1.0 / (1.0 + cfg.density_dissipation * dt))
     if cfg.temperature_cooling > 0.0:
         temperature *= np.float32(1.0 / (1.0 + cfg.temperature_cooling * dt))
     fluid_cells = state.hierarchy.fluid_weight if state.hierarchy is not None else np.float32(1.0)
-    state.density = np.minimum(density * fluid_cells, np.float32(cfg.density_limit))
-    state.temperature = np.minimum(temperature * fluid_cells, np.float32(cfg.temperature_limit))
+    return (np.minimum(density * fluid_cells, np.float32(cfg.density_limit)),
+            np.minimum(temperature * fluid_cells, np.float32(cfg.temperature_limit)))
 
 
 def fluid_step(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, dt: float, up_local: np.ndarray,
@@ -245,7 +313,8 @@ def advect_particles(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, dt: floa
     """Move particles with the flow (midpoint rule); rebirth those that left, entered a solid or grew old.
 
     The midpoint rule runs compiled (:func:`systems.toon_smoke.kernels.advect_particles_kernel`): the same bits as
-    two queries of :class:`systems.toon_smoke.grid.MacSampler`, its numpy reference in the tests."""
+    two queries of :class:`systems.toon_smoke.grid.MacSampler`, its numpy reference in the tests; so does the
+    choice of who is reborn (:func:`rebirth`)."""
     geo = _geometry(cfg, state)
     p = state.particles
     if len(p) == 0:
@@ -257,19 +326,45 @@ def advect_particles(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, dt: floa
     half_extent, h = 0.5 * geo.extent, float(geo.h)
     p, velocity = advect_particles_kernel(np.ascontiguousarray(p, np.float64), u, v, w, half_extent, h, 0.5 * dt,
                                           float(dt))
-    state.particle_age += dt
-    reborn = np.any(np.abs(p) > half_extent, axis=1)
-    if state.display_solid is not None and state.display_solid.any():
-        reborn |= _nearest(state.display_solid, geo.to_cells(p) * geo.factor)
-    if cfg.particle_lifetime > 0.0:
-        reborn |= state.particle_age >= cfg.particle_lifetime
-    count = int(reborn.sum())
+    reborn, count = rebirth(cfg, state, p, dt)
     if count:
         p[reborn] = spawn_positions(cfg, state, rng, count)
         state.particle_age[reborn] = 0.0
         velocity[reborn] = mac_velocity_kernel(p[reborn], u, v, w, half_extent, h)
     state.particles = p
     state.particle_velocity = velocity  # the midpoint velocity stretches the blobs (figure 2)
+
+
+def rebirth(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, p: np.ndarray, dt: float
+            ) -> tuple[np.ndarray, int]:
+    """Age the particles by ``dt`` (in place) and flag those to rebirth: outside the box, in a solid display cell,
+    or as old as ``particle_lifetime``.  Returns (the flags, their count); one compiled pass
+    (:func:`systems.toon_smoke.kernels.particle_rebirth_kernel`), the same flags and ages as
+    :func:`rebirth_numpy`, its reference in the tests."""
+    from systems.toon_smoke.kernels import particle_rebirth_kernel
+
+    geo = _geometry(cfg, state)
+    solid = state.display_solid
+    reborn, count = particle_rebirth_kernel(p, state.particle_age, float(dt), 0.5 * geo.extent,
+                                            _NO_SOLID if solid is None else solid, solid is not None,
+                                            float(geo.h), geo.factor, float(cfg.particle_lifetime))
+    return reborn, int(count)
+
+
+_NO_SOLID = np.zeros((1, 1, 1), bool)
+
+
+def rebirth_numpy(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, p: np.ndarray, dt: float
+                  ) -> tuple[np.ndarray, int]:
+    """:func:`rebirth` in numpy (its reference)."""
+    geo = _geometry(cfg, state)
+    state.particle_age += dt
+    reborn = np.any(np.abs(p) > 0.5 * geo.extent, axis=1)
+    if state.display_solid is not None and state.display_solid.any():
+        reborn |= _nearest(state.display_solid, geo.to_cells(p) * geo.factor)
+    if cfg.particle_lifetime > 0.0:
+        reborn |= state.particle_age >= cfg.particle_lifetime
+    return reborn, int(reborn.sum())
 
 
 def _nearest(mask: np.ndarray, cells: np.ndarray) -> np.ndarray:
@@ -358,7 +453,19 @@ class StepContext:
 
 
 def _up_local(ctx: StepContext) -> np.ndarray:
-    return quat_rotate(quat_conjugate(ctx.transform.rotation), _UP)
+    """World up in the volume's frame (read-only; kept per rotation: volumes rarely turn)."""
+    key = ctx.transform.rotation.tobytes()
+    up = _UP_LOCAL.get(key)
+    if up is None:
+        up = quat_rotate(quat_conjugate(ctx.transform.rotation), _UP)
+        up.flags.writeable = False
+        if len(_UP_LOCAL) >= 64:
+            _UP_LOCAL.clear()
+        _UP_LOCAL[key] = up
+    return up
+
+
+_UP_LOCAL: dict[bytes, np.ndarray] = {}
 
 
 # The phases of one step, in order (seeds/002 figure 1); the benchmark times each one.  The simulation phases

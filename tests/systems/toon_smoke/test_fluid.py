@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from engine.spatial import Transform
 from systems.toon_smoke import fluid, poisson
 from systems.toon_smoke.grid import Geometry
 from tests.systems.toon_smoke.helpers import preset, run_state, small
@@ -360,3 +361,180 @@ def test_a_volume_moving_with_no_collider_in_reach_keeps_its_solver_hierarchy():
     transform.position = transform.position + np.array([3.0, 1.0, -2.0])
     simulate.update_obstacles(None, 1, transform, cfg, state)
     assert state.hierarchy is hierarchy and np.array_equal(state.solid, solid) and solid.any()
+
+
+def _bits(a: np.ndarray) -> bytes:
+    """Every bit of an array (the sign of zero and NaN payloads too)."""
+    return np.ascontiguousarray(a).view(np.uint8).tobytes()
+
+
+def _same_float(a: float, b: float) -> bool:
+    return np.float64(a).tobytes() == np.float64(b).tobytes()
+
+
+def _face_velocities(shape, rng, scale=1.0):
+    nx, ny, nz = shape
+    return [(scale * rng.standard_normal(s)).astype(np.float32)
+            for s in ((nx + 1, ny, nz), (nx, ny + 1, nz), (nx, ny, nz + 1))]
+
+
+@pytest.mark.parametrize("shape, radius, open_sides, target, warm, poison", [
+    ((16, 16, 16), 3.0, _EXPLOSION, True, True, None),  # the demo puff: an obstacle, a blast's target divergence
+    ((16, 16, 16), 3.0, _EXPLOSION, False, True, None),  # the same puff once the blast is over
+    ((16, 16, 16), 4.0, _CLOSED, False, False, None),  # closed box (singular), cold start
+    ((12, 20, 10), 0.0, _OPEN_TOP, True, False, None),  # empty grid (no solid cell), non-cubic
+    ((8, 8, 8), 99.0, _EXPLOSION, True, True, None),  # full grid: every cell solid, nothing to solve
+    ((16, 16, 16), 3.0, _EXPLOSION, True, False, "nan"),  # a NaN face velocity: max|∇·u| is NaN, as in numpy
+    ((16, 16, 16), 3.0, _OPEN_TOP, False, False, "zero"),  # still air: zero divergence, signed zeros in u
+])
+def test_compiled_projection_matches_the_numpy_projection_bit_for_bit(shape, radius, open_sides, target, warm,
+                                                                      poison):
+    """``fluid.project`` (the divergence, right-hand side, gradient update and divergence after in two compiled
+    calls around the solve) gives the bits of ``fluid.project_numpy`` (whole-array expressions): the updated
+    faces, φ, the divergence before and after and the iteration count.  The velocities span six decades, so a
+    sum taken in another order or a product with another rounding changes bits."""
+    rng = np.random.default_rng(21)
+    hierarchy = poisson.build_hierarchy(_sphere_in(shape, radius), open_sides)
+    assert hierarchy.levels[0].active.any() == (radius < 99.0)
+    velocity = [c * np.exp(rng.uniform(-7.0, 7.0, c.shape)).astype(np.float32) for c in _face_velocities(shape, rng)]
+    fluid.enforce_solid_faces(*velocity, hierarchy)
+    if poison == "nan":
+        velocity[0][8, 8, 1] = np.nan  # a fluid cell's face (the sphere of radius 3 is centred)
+    elif poison == "zero":
+        for c in velocity:
+            c[...] = 0.0
+        velocity[1][::2] = -0.0
+    divergence = (rng.standard_normal(shape) * (rng.random(shape) < 0.2)).astype(np.float32) if target else None
+    pressure = (0.1 * rng.standard_normal(shape)).astype(np.float32) if warm else np.zeros(shape, np.float32)
+    got = [c.copy() for c in velocity]
+    want = [c.copy() for c in velocity]
+    phi, before, after, iterations = fluid.project(*got, 0.3, hierarchy, pressure, 1e-4, 30, divergence)
+    want_phi, want_before, want_after, want_iterations = fluid.project_numpy(*want, 0.3, hierarchy, pressure,
+                                                                             1e-4, 30, divergence)
+    for a, b in zip(got, want):
+        assert _bits(a) == _bits(b)
+    assert _bits(phi) == _bits(want_phi)
+    assert _same_float(before, want_before) and _same_float(after, want_after)
+    assert isinstance(before, float) and isinstance(after, float)
+    assert iterations == want_iterations
+    if poison is None and radius < 99.0:  # a real solve ran and changed the flow
+        assert iterations > 0 and before > 1.0 and not all(np.array_equal(a, b) for a, b in zip(got, velocity))
+    assert np.isnan(before) == (poison == "nan")
+
+
+@pytest.mark.parametrize("hierarchy, dissipation, cooling", [(True, 0.35, 1.2), (True, 0.0, 0.0), (False, 0.5, 0.0)])
+def test_compiled_fade_and_clamp_matches_the_numpy_reference_bit_for_bit(hierarchy, dissipation, cooling):
+    """The scalars' fade, solid clearing and clamp (``simulate.fade_and_clamp``) against the numpy code: values above
+    the limits, NaN, signed zeros, solids (a hierarchy) or none, each fade on or off."""
+    from systems.toon_smoke import simulate
+
+    cfg = small(density_dissipation=dissipation, temperature_cooling=cooling, density_limit=2.0,
+                temperature_limit=3.0)
+    state = simulate.new_state(cfg, np.random.default_rng(0))
+    if hierarchy:
+        simulate.update_obstacles(None, 1, Transform(), cfg, state)
+        assert state.solid.any()
+    rng = np.random.default_rng(8)
+    shape = state.density.shape
+    fields = [(4.0 * rng.standard_normal(shape)).astype(np.float32) for _ in range(2)]
+    for f in fields:
+        f[0, 0, :4] = (np.nan, -0.0, 0.0, np.inf)
+        f[1, 1, 1] = 2.0  # exactly the density limit
+    want = simulate.fade_and_clamp_numpy(cfg, state, *[f.copy() for f in fields], 1.0 / 60.0)
+    got = simulate.fade_and_clamp(cfg, state, *[f.copy() for f in fields], 1.0 / 60.0)
+    for g, w, f, limit in zip(got, want, fields, (2.0, 3.0)):
+        assert g.dtype == np.float32 and _bits(g) == _bits(w)
+        assert np.nanmax(g) == limit and np.isnan(g[0, 0, 0])
+    assert (np.array_equal(got[0], np.minimum(fields[0], np.float32(2.0)), equal_nan=True)
+            == (not hierarchy and dissipation == 0.0))
+
+
+@pytest.mark.parametrize("lifetime, solid", [(0.0, "sphere"), (0.4, "sphere"), (0.4, "random"), (0.4, None),
+                                             (0.0, "none")])
+def test_compiled_rebirth_matches_the_numpy_reference(lifetime, solid):
+    """Which particles are reborn (``simulate.rebirth``) and their ages, against the numpy code: particles inside,
+    outside, exactly on the box's faces, in and next to solid display cells, with a NaN coordinate (cell 0), ages
+    reaching the lifetime exactly; with and without a lifetime, with the obstacle's display solid, a random one,
+    none, or one with no solid cell."""
+    from systems.toon_smoke import simulate
+
+    cfg = small(particle_lifetime=lifetime)
+    state = simulate.new_state(cfg, np.random.default_rng(0))
+    simulate.update_obstacles(None, 1, Transform(), cfg, state)
+    rng = np.random.default_rng(9)
+    if solid is None:
+        state.display_solid = None
+    elif solid == "none":
+        state.display_solid = np.zeros_like(state.display_solid)
+    elif solid == "random":
+        state.display_solid = rng.random(state.display_solid.shape) < 0.5
+        state.display_solid[0] = True  # where a NaN coordinate looks (numpy's cast gives cell 0)
+        state.display_solid[-1] = False
+    half = 0.5 * state.geometry.extent
+    p = rng.uniform(-1.1, 1.1, (4000, 3)) * half
+    p[:30] = rng.uniform(-0.35, 0.35, (30, 3))  # about the sphere obstacle's surface (radius 0.3)
+    p[30:36] = [half, -half, [half[0], 0.0, 0.0], [-half[0], 0.0, 0.0], [0.0, np.nextafter(half[1], 9.0), 0.0],
+                [np.nan, 0.0, 0.0]]
+    dt = 1.0 / 60.0
+    ages = rng.uniform(0.0, 0.5, len(p))
+    exact = 0.4 - dt  # ages that reach the lifetime exactly after this step, and the float either side
+    while exact + dt != 0.4:
+        exact = np.nextafter(exact, 1.0)
+    ages[36:39] = [np.nextafter(exact, 0.0), exact, np.nextafter(exact, 1.0)]
+    ages[35] = 0.0  # the NaN particle: reborn only for its cell
+    p[36:39] = 0.5 * half  # inside, clear of the obstacle
+    state.particle_age = ages.copy()
+    with np.errstate(invalid="ignore"):  # numpy's cast of the NaN coordinate to a cell index
+        want, want_count = simulate.rebirth_numpy(cfg, state, p, dt)
+    want_ages = state.particle_age
+    state.particle_age = ages.copy()
+    got, count = simulate.rebirth(cfg, state, p, dt)
+    assert np.array_equal(got, want) and count == want_count == int(want.sum())
+    assert _bits(state.particle_age) == _bits(want_ages)
+    inside = ~np.any(np.abs(p) > half, axis=1)
+    assert 0 < count and not want[inside].all() and want[~inside & ~np.isnan(p).any(axis=1)].all()
+    if solid == "sphere":
+        assert want[:30].any() and not want[:30].all()  # some near the obstacle are in it, some not
+    if lifetime > 0.0 and solid != "random":
+        assert list(want[36:39]) == [False, True, True]
+    assert want[35] == (solid == "random")  # the NaN particle
+
+
+def test_collider_bounds_test_matches_the_numpy_reference():
+    """The per-step bounding test of other colliders (``simulate._overlapping_colliders``, Python floats) keeps
+    exactly the colliders of its numpy reference, with spheres and boxes placed right at the boundary (the gap
+    equal to the reach, and one float either side), scaled, height fields above and below, and triggers."""
+    from engine.collider import Collider
+    from engine.exact import length
+    from engine.heightfield import HeightField
+    from engine.world import World
+    from systems.toon_smoke import simulate
+
+    cfg = small()
+    world = World()
+    rng = np.random.default_rng(12)
+    volume = Transform(position=np.array([0.3, 1.7, -2.2]))
+    reach = 0.5 * float(length(np.asarray(cfg.extent, float)))
+    for n in range(300):
+        direction = rng.standard_normal(3)
+        position = volume.position + direction / np.linalg.norm(direction) * rng.uniform(reach + 0.1, reach + 3.0)
+        scale = rng.uniform(0.5, 2.0, 3) if n % 3 else np.ones(3)
+        gap = float(length(position - volume.position)) - reach
+        if n % 2:  # a sphere whose scaled radius is the gap, or the float just below or above it
+            size = float(np.nextafter(gap, [-9.0, gap, 9.0][n % 3])) / float(np.max(np.abs(scale)))
+            collider = Collider(shape="sphere", radius=size)
+        else:  # a box whose scaled half-diagonal is near the gap
+            e = abs(gap) * rng.dirichlet(np.ones(3)) ** 0.5
+            collider = Collider(shape="box", half_extents=e / scale)
+        world.spawn(Transform(position=position, scale=scale), collider)
+    for top in (-1.0, 0.0, 1.0):  # the volume's lowest reach against the field's highest point
+        heights = np.full((4, 4), volume.position[1] - reach + top)
+        world.spawn(Transform(position=np.array([0.0, 0.0, 0.0])), Collider(shape="heightfield",
+                                                                           heightfield=HeightField(heights)))
+    world.spawn(Transform(position=volume.position.copy()), Collider(shape="sphere", is_trigger=True))
+    own = world.spawn(Transform(position=volume.position.copy()), Collider(shape="sphere"))
+    got = simulate._overlapping_colliders(world, own, volume, cfg)
+    want = simulate._overlapping_colliders_numpy(world, own, volume, cfg)
+    assert [e for e, _, _ in got] == [e for e, _, _ in want]
+    assert 50 < len(got) < 250  # both sides of the boundary
+    assert sum(c.shape == "heightfield" for _, _, c in got) == 2
