@@ -171,6 +171,39 @@ def _max_abs(x: float, y: float, z: float) -> float:
 
 
 def _solid_mask(centres, transform: Transform, cfg: ToonSmokeVolumeConfig, colliders: list) -> np.ndarray:
+    """Cells (centres: the three broadcastable axes of local coordinates) inside the sphere obstacle or a collider.
+
+    Height fields are tested compiled (:func:`systems.toon_smoke.kernels.heightfield_solid_kernel`, the same
+    operations as ``Collider.signed_distance``); other shapes by the collider itself.  The same mask as
+    :func:`_solid_mask_numpy`, its reference in the tests."""
+    from systems.toon_smoke.kernels import heightfield_solid_kernel
+
+    x, y, z = np.broadcast_arrays(*centres)
+    solid = np.zeros(x.shape, bool)
+    if cfg.obstacle_radius > 0.0:
+        c = cfg.obstacle_center
+        solid |= (x - c[0]) ** 2 + (y - c[1]) ** 2 + (z - c[2]) ** 2 < cfg.obstacle_radius ** 2
+    world_points = None
+    for _, t, collider in colliders:
+        if collider.shape == "heightfield" and _finite(transform, t):
+            field = collider.heightfield
+            heightfield_solid_kernel(*(np.ascontiguousarray(c, np.float64).reshape(-1) for c in centres),
+                                     transform.position, transform.rotation, t.position, t.rotation,
+                                     field.heights, float(field.spacing), field.origin, solid)
+            continue
+        if world_points is None:
+            local = np.stack([x.ravel(), y.ravel(), z.ravel()], axis=-1)
+            world_points = transform.position + quat_rotate(transform.rotation, local)
+        solid |= (collider.signed_distance(world_points, t) < 0.0).reshape(x.shape)
+    return solid
+
+
+def _finite(*transforms: Transform) -> bool:
+    return all(np.isfinite(t.position).all() and np.isfinite(t.rotation).all() for t in transforms)
+
+
+def _solid_mask_numpy(centres, transform: Transform, cfg: ToonSmokeVolumeConfig, colliders: list) -> np.ndarray:
+    """:func:`_solid_mask` with every collider's own ``signed_distance`` (its reference)."""
     x, y, z = np.broadcast_arrays(*centres)
     solid = np.zeros(x.shape, bool)
     if cfg.obstacle_radius > 0.0:

@@ -538,3 +538,64 @@ def test_collider_bounds_test_matches_the_numpy_reference():
     assert [e for e, _, _ in got] == [e for e, _, _ in want]
     assert 50 < len(got) < 250  # both sides of the boundary
     assert sum(c.shape == "heightfield" for _, _, c in got) == 2
+
+
+@pytest.mark.parametrize("volume_turn, field_turn", [(0.0, 0.0), (0.7, 0.0), (0.0, -1.1), (2.3, 0.4)])
+def test_compiled_height_field_mask_matches_the_colliders_own_test(volume_turn, field_turn):
+    """The solid cells under height field colliders (``simulate._solid_mask``, compiled) are those of the colliders'
+    own ``signed_distance`` (``_solid_mask_numpy``), on the simulation and the display grid: a rough field crossing
+    the volume, unrotated or turned about tilted axes, a second field the volume reaches past its border (clamped
+    samples), a box collider beside them, the sphere obstacle."""
+    from engine.collider import Collider
+    from engine.heightfield import HeightField
+    from engine.spatial import quat_from_axis_angle
+    from systems.toon_smoke import simulate
+
+    cfg = small(obstacle_radius=0.4)
+    geo = simulate.geometry_for(cfg)
+    rng = np.random.default_rng(14)
+    volume = Transform(position=np.array([3.1, 0.45, -2.7]), rotation=quat_from_axis_angle([0.3, 1.0, 0.2],
+                                                                                           volume_turn))
+    rough = HeightField(rng.uniform(-0.6, 0.6, (23, 31)), spacing=0.17, origin=np.array([1.2, -4.6]))
+    edge = HeightField(rng.uniform(-0.3, 0.9, (5, 4)), spacing=0.35, origin=np.array([3.4, -3.1]))
+    colliders = [
+        (1, Transform(position=np.array([0.05, 0.3, 0.1]), rotation=quat_from_axis_angle([0.1, 1.0, -0.4],
+                                                                                            field_turn)),
+         Collider(shape="heightfield", heightfield=rough)),
+        (2, Transform(position=np.array([0.0, -0.2, 0.0])), Collider(shape="heightfield", heightfield=edge)),
+        (3, Transform(position=np.array([3.6, 0.9, -2.4])), Collider(shape="box", half_extents=[0.3, 0.2, 0.4])),
+    ]
+    for centres in (geo.local_centres(), geo.local_display_centres()):
+        got = simulate._solid_mask(centres, volume, cfg, colliders)
+        want = simulate._solid_mask_numpy(centres, volume, cfg, colliders)
+        assert got.dtype == bool and np.array_equal(got, want)
+        assert 0.1 < got.mean() < 0.9  # the surface really crosses the volume
+        for k in (0, 1):  # each height field alone, so neither hides the other's cells
+            assert np.array_equal(simulate._solid_mask(centres, volume, cfg, colliders[k:k + 1]),
+                                  simulate._solid_mask_numpy(centres, volume, cfg, colliders[k:k + 1]))
+
+
+def test_compiled_height_field_mask_keeps_cells_exactly_on_the_surface_out():
+    """A flat field through a row of display cell centres exactly (d = 0: not solid, as ``signed_distance < 0``
+    says), at rows whose coordinates round differently when summed in another order: a slip in the compiled
+    path's order would move those cells in or out."""
+    from engine.collider import Collider
+    from engine.heightfield import HeightField
+    from systems.toon_smoke import simulate
+
+    cfg = small(obstacle_radius=0.0)
+    geo = simulate.geometry_for(cfg)
+    volume = Transform(position=np.array([0.37, 0.7316294, -0.61]))
+    placed = Transform(position=np.array([0.1, -0.2938471, 0.0]))
+    centres = geo.local_display_centres()
+    ys = centres[1].reshape(-1)
+    rows = [r for r in range(1, len(ys) - 1)  # where the sums associated the other way round differently
+            if (volume.position[1] + ys[r]) - placed.position[1] != volume.position[1] + (ys[r] - placed.position[1])]
+    assert len(rows) >= 3
+    for row in rows[:3]:
+        level = (volume.position[1] + ys[row]) - placed.position[1]  # the row's height in the field's frame
+        field = HeightField(np.full((3, 3), level), spacing=4.0, origin=np.array([-4.0, -4.0]))
+        colliders = [(1, placed, Collider(shape="heightfield", heightfield=field))]
+        got = simulate._solid_mask(centres, volume, cfg, colliders)
+        assert np.array_equal(got, simulate._solid_mask_numpy(centres, volume, cfg, colliders))
+        assert not got[:, row].any() and got[:, :row].all() and not got[:, row + 1:].any()
