@@ -27,6 +27,7 @@ import numpy as np
 from components.toon_smoke import SourceState, ToonSmokeState, ToonSmokeVolumeConfig
 from engine.collider import Collider
 from engine.exact import length
+from engine.heightfield import HeightField
 from engine.spatial import Transform, quat_conjugate, quat_rotate
 from engine.world import World
 from systems.toon_smoke import fluid, poisson
@@ -122,11 +123,26 @@ def _overlapping_colliders(world: World, entity: int, transform: Transform, cfg:
                 if gap > _length(hx * sx, hy * sy, hz * sz):
                     continue
         if shape == "heightfield":
-            top = float(t.position[1]) + float(collider.heightfield.heights.max())
-            if py - reach > top:
+            fx, fy, fz = t.position.tolist()
+            if not _reaches_up_to(collider.heightfield, fy, py - reach, px - fx, pz - fz):
                 continue
         found.append((other, t, collider))
     return found
+
+
+def _reaches_up_to(field: HeightField, base: float, bottom: float, x: float, z: float) -> bool:
+    """Whether not bottom > base + max(heights) (so a NaN reaches), reading one sample first: the one nearest
+    (x, z) in the field's unrotated frame, under a volume that sits on the ground.  Rounding is monotonic, so
+    bottom ≤ base + h for one sample h means bottom ≤ base + max too; only when that sample lies below does the
+    whole field's max decide, as before."""
+    heights = field.heights
+    rows, cols = heights.shape
+    col, row = ((x - float(field.origin[0])) / field.spacing, (z - float(field.origin[1])) / field.spacing)
+    col = min(max(int(col + 0.5), 0), cols - 1) if math.isfinite(col) else 0
+    row = min(max(int(row + 0.5), 0), rows - 1) if math.isfinite(row) else 0
+    if not bottom > base + float(heights[row, col]):
+        return True
+    return not bottom > base + float(heights.max())
 
 
 def _overlapping_colliders_numpy(world: World, entity: int, transform: Transform, cfg: ToonSmokeVolumeConfig

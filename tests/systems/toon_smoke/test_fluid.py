@@ -503,7 +503,9 @@ def test_compiled_rebirth_matches_the_numpy_reference(lifetime, solid):
 def test_collider_bounds_test_matches_the_numpy_reference():
     """The per-step bounding test of other colliders (``simulate._overlapping_colliders``, Python floats) keeps
     exactly the colliders of its numpy reference, with spheres and boxes placed right at the boundary (the gap
-    equal to the reach, and one float either side), scaled, height fields above and below, and triggers."""
+    equal to the reach, and one float either side), scaled, height fields whose highest point is just below, at
+    or above the volume's lowest reach (flat, or a lone peak far from the volume), one with a NaN height, and
+    triggers."""
     from engine.collider import Collider
     from engine.exact import length
     from engine.heightfield import HeightField
@@ -527,17 +529,26 @@ def test_collider_bounds_test_matches_the_numpy_reference():
             e = abs(gap) * rng.dirichlet(np.ones(3)) ** 0.5
             collider = Collider(shape="box", half_extents=e / scale)
         world.spawn(Transform(position=position, scale=scale), collider)
-    for top in (-1.0, 0.0, 1.0):  # the volume's lowest reach against the field's highest point
-        heights = np.full((4, 4), volume.position[1] - reach + top)
+    bottom = volume.position[1] - reach
+    for top in (-1.0, 0.0, 1.0):  # the volume's lowest reach against the field's highest point: flat fields,
+        heights = np.full((4, 4), bottom + top)  # then rough ones whose peak is far from the volume
         world.spawn(Transform(position=np.array([0.0, 0.0, 0.0])), Collider(shape="heightfield",
                                                                            heightfield=HeightField(heights)))
+        heights = bottom - rng.uniform(0.5, 2.0, (9, 7))
+        heights[8, 6] = bottom + top
+        world.spawn(Transform(position=np.array([0.0, 0.0, 0.0])), Collider(shape="heightfield",
+                                                                           heightfield=HeightField(heights)))
+    heights = bottom - rng.uniform(0.5, 2.0, (9, 7))
+    heights[0, 3] = np.nan
+    world.spawn(Transform(), Collider(shape="heightfield", heightfield=HeightField(heights)))
     world.spawn(Transform(position=volume.position.copy()), Collider(shape="sphere", is_trigger=True))
     own = world.spawn(Transform(position=volume.position.copy()), Collider(shape="sphere"))
     got = simulate._overlapping_colliders(world, own, volume, cfg)
     want = simulate._overlapping_colliders_numpy(world, own, volume, cfg)
     assert [e for e, _, _ in got] == [e for e, _, _ in want]
     assert 50 < len(got) < 250  # both sides of the boundary
-    assert sum(c.shape == "heightfield" for _, _, c in got) == 2
+    assert [e - 300 for e, _, c in got if c.shape == "heightfield"] == [3, 4, 5, 6, 7]  # the top at or above the
+    # bottom, or a NaN height
 
 
 @pytest.mark.parametrize("volume_turn, field_turn", [(0.0, 0.0), (0.7, 0.0), (0.0, -1.1), (2.3, 0.4)])
