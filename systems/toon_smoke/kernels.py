@@ -823,25 +823,24 @@ def fade_and_clamp_kernel(density, temperature, fade_density, density_factor, fa
                           temperature_factor, fluid_weight, weighted, density_limit, temperature_limit
                           ):  # pragma: no cover
     """In place: ρ ·= its fade factor (with ``fade_density``), T ·= its own (with ``fade_temperature``), both ·= the
-    fluid weight (1 in fluid cells, 0 in solids; the numpy code's scalar 1 without ``weighted``), then the
-    minimum with the limit (a NaN stays NaN, as ``np.minimum``); float32, the order of ``simulate.scalar_step``'s
-    numpy reference."""
+    fluid weight (1 in fluid cells, 0 in solids; with ``weighted``: the numpy code's product with a scalar 1 leaves
+    every value as it is), then ``np.minimum`` with the limit (a NaN stays, an equal value gives the limit); float32,
+    the order of ``simulate.fade_and_clamp_numpy``."""
     nx, ny, nz = density.shape
-    one = np.float32(1.0)
     for i in range(nx):
         for j in range(ny):
             for k in range(nz):
-                weight = fluid_weight[i, j, k] if weighted else one
                 d = density[i, j, k]
+                t = temperature[i, j, k]
                 if fade_density:
                     d = d * density_factor
-                d = d * weight
-                density[i, j, k] = density_limit if d > density_limit else d
-                t = temperature[i, j, k]
                 if fade_temperature:
                     t = t * temperature_factor
-                t = t * weight
-                temperature[i, j, k] = temperature_limit if t > temperature_limit else t
+                if weighted:
+                    d = d * fluid_weight[i, j, k]
+                    t = t * fluid_weight[i, j, k]
+                density[i, j, k] = d if d < density_limit or d != d else density_limit
+                temperature[i, j, k] = t if t < temperature_limit or t != t else temperature_limit
 
 
 @kernel

@@ -449,6 +449,19 @@ def test_compiled_fade_and_clamp_matches_the_numpy_reference_bit_for_bit(hierarc
             == (not hierarchy and dissipation == 0.0))
 
 
+def test_compiled_clamp_breaks_ties_as_numpy():
+    """``np.minimum`` returns its second operand (the limit) on a tie: with a limit of +0 a −0 becomes +0, with −0
+    a +0 becomes −0; the kernel does the same."""
+    from systems.toon_smoke.kernels import fade_and_clamp_kernel
+
+    for limit in (np.float32(0.0), np.float32(-0.0)):
+        values = np.array([-0.0, 0.0, -1.0, 1.0, np.nan], np.float32).reshape(1, 1, 5)
+        got = values.copy()
+        fade_and_clamp_kernel(got, got.copy(), False, np.float32(1.0), False, np.float32(1.0), got, False, limit,
+                              limit)
+        assert _bits(got) == _bits(np.minimum(values, limit))
+
+
 @pytest.mark.parametrize("lifetime, solid", [(0.0, "sphere"), (0.4, "sphere"), (0.4, "random"), (0.4, None),
                                              (0.0, "none")])
 def test_compiled_rebirth_matches_the_numpy_reference(lifetime, solid):
