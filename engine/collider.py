@@ -439,8 +439,9 @@ def _refine_crossing(f, a: F64, b: F64, fa: F64, fb: F64) -> F64:
 
 
 @kernel(inline="always")
-def _field_height(heights: F64, ox: float, oz: float, spacing: float, x: float, z: float) -> float:
-    """HeightField.height_at for one point."""
+def field_height(heights: F64, ox: float, oz: float, spacing: float, x: float, z: float) -> float:
+    """HeightField.height_at for one point, in its operations (clip, floor, bilinear blend): for kernels that
+    sample a height field (the collider's ray casts, the toon smoke's solid cells)."""
     rows, cols = heights.shape
     gx = _min(_max((x - ox) / spacing, 0.0), float(cols - 1))
     gz = _min(_max((z - oz) / spacing, 0.0), float(rows - 1))
@@ -456,7 +457,7 @@ def _field_height(heights: F64, ox: float, oz: float, spacing: float, x: float, 
 
 @kernel
 def _heightfield_gap_kernel(p: F64, heights: F64, ox: float, oz: float, spacing: float) -> tuple[F64, bool]:
-    """y − HeightField.height_at(x, z) of every point, with its operations (:func:`_field_height`), and True; False
+    """y − HeightField.height_at(x, z) of every point, with its operations (:func:`field_height`), and True; False
     as soon as a point's x or z is NaN (the gaps then unfinished), where height_at's indexing would fail."""
     n = p.shape[0]
     gap = np.empty(n)
@@ -464,7 +465,7 @@ def _heightfield_gap_kernel(p: F64, heights: F64, ox: float, oz: float, spacing:
         x, z = p[i, 0], p[i, 2]
         if x != x or z != z:
             return gap, False
-        gap[i] = p[i, 1] - _field_height(heights, ox, oz, spacing, x, z)
+        gap[i] = p[i, 1] - field_height(heights, ox, oz, spacing, x, z)
     return gap, True
 
 
@@ -474,7 +475,7 @@ def _ray_height_gap(o: F64, d: F64, i: int, t: float, heights: F64, ox: float, o
     x = o[i, 0] + t * d[i, 0]
     y = o[i, 1] + t * d[i, 1]
     z = o[i, 2] + t * d[i, 2]
-    return y - _field_height(heights, ox, oz, spacing, x, z)
+    return y - field_height(heights, ox, oz, spacing, x, z)
 
 
 @kernel(inline="always")
@@ -485,8 +486,8 @@ def _field_normal(heights: F64, ox: float, oz: float, spacing: float, x_lo: floa
     e = 0.5 * spacing
     xa, xb = _max(x - e, x_lo), _min(x + e, x_hi)
     za, zb = _max(z - e, z_lo), _min(z + e, z_hi)
-    dhdx = (_field_height(heights, ox, oz, spacing, xb, z) - _field_height(heights, ox, oz, spacing, xa, z)) / (xb - xa)
-    dhdz = (_field_height(heights, ox, oz, spacing, x, zb) - _field_height(heights, ox, oz, spacing, x, za)) / (zb - za)
+    dhdx = (field_height(heights, ox, oz, spacing, xb, z) - field_height(heights, ox, oz, spacing, xa, z)) / (xb - xa)
+    dhdz = (field_height(heights, ox, oz, spacing, x, zb) - field_height(heights, ox, oz, spacing, x, za)) / (zb - za)
     nx, nz = -dhdx, -dhdz
     norm = np.sqrt(nx * nx + 1.0 + nz * nz)
     return nx / norm, 1.0 / norm, nz / norm

@@ -19,6 +19,7 @@ import math
 
 import numpy as np
 
+from engine.collider import field_height
 from engine.jit import kernel, pairwise_sum
 
 
@@ -903,24 +904,13 @@ def heightfield_solid_kernel(xs, ys, zs, position, rotation, field_position, fie
     """solid[i, j, k] |= the cell centre (xs[i], ys[j], zs[k]) (local metres of a volume placed at ``position``,
     ``rotation``) lies below a height field collider (``Collider.signed_distance`` < 0: the collider-frame height
     minus ``HeightField.height_at``).  Finite coordinates; ``solid`` in place."""
-    rows, cols = heights.shape
     qw, qx, qy, qz = rotation[0], rotation[1], rotation[2], rotation[3]
     cw, cx, cy, cz = field_rotation[0], -1.0 * field_rotation[1], -1.0 * field_rotation[2], -1.0 * field_rotation[3]
-    top_x, top_z = np.float64(cols - 1), np.float64(rows - 1)
     for i in range(xs.shape[0]):
         for j in range(ys.shape[0]):
             for k in range(zs.shape[0]):
                 rx, ry, rz = _rotate(qw, qx, qy, qz, xs[i], ys[j], zs[k])
                 px, py, pz = _rotate(cw, cx, cy, cz, (position[0] + rx) - field_position[0],
                                      (position[1] + ry) - field_position[1], (position[2] + rz) - field_position[2])
-                gx = min(max((px - origin[0]) / spacing, 0.0), top_x)
-                gz = min(max((pz - origin[1]) / spacing, 0.0), top_z)
-                c0 = min(int(gx), cols - 2)
-                r0 = min(int(gz), rows - 2)
-                tx, tz = gx - c0, gz - r0
-                h00, h01 = heights[r0, c0], heights[r0, c0 + 1]
-                h10, h11 = heights[r0 + 1, c0], heights[r0 + 1, c0 + 1]
-                near = h00 + tx * (h01 - h00)
-                far = h10 + tx * (h11 - h10)
-                if py - (near + tz * (far - near)) < 0.0:
+                if py - field_height(heights, origin[0], origin[1], spacing, px, pz) < 0.0:
                     solid[i, j, k] = True
