@@ -1,11 +1,11 @@
 """``python -m engine warm``: compile the kernels the scenes use ahead of their first run, on every core.
 
 The effects' compiled kernels (:mod:`engine.jit`) compile on first use and are cached on disk; on a fresh
-machine that first use costs about two minutes of one core, spent inside whatever ran first: the demo's first
+machine that first use costs about two and a half minutes of one core, spent inside whatever ran first: the demo's first
 frame, or the first test that ticks an effect. This command runs each scene given to it for a few ticks, rendered
 headless at a small size (the grass's frame plan is compiled in the render path), as separate processes, several at
 once. Each process compiles what its scene needs; the cache's lock file (:class:`engine.jit.LockedCache`) makes
-processes that compile the same helper at once safe. Longest first, so the processes finish together.
+processes that compile the same helper at once safe. The scenes start in the order given.
 
 With the cache already filled it only loads, a few seconds a scene. ``make demo`` and ``make test`` run it once per
 change of the sources (a stamp file in the virtual environment).
@@ -23,21 +23,11 @@ from pathlib import Path
 
 from engine import jit
 
-# The scenes' compile cost on a cold cache, measured (2-core VM, seconds): longest first balances the processes.
-# The demo uses every effect's kernels: it goes last, to load what the showcases compiled rather than compile the
-# same kernels beside them (run beside the water's showcase it took 41 s instead of about 10).
-_COST = {"water_surface": 73.0, "toon_smoke": 48.0, "grass_field": 15.0, "energy_wave": 13.0, "dust_devil": 3.0,
-         "demo": 0.5}
-
-
-def cost(scene: Path) -> float:
-    """Expected compile seconds of a scene (its effect's figure from the name; 1 for one not measured)."""
-    return next((c for name, c in _COST.items() if name in scene.stem), 1.0)
-
-
 def warm_command(scenes: list[Path], jobs: int | None, steps: int, headless: bool = True) -> int:
-    """Run ``scenes`` for ``steps`` ticks each in up to ``jobs`` processes; 0 if every run exits 0, else 1 (and
-    the failing runs' last lines). The kernels stay compiled either way for the runs that got there."""
+    """Run ``scenes`` for ``steps`` ticks each in up to ``jobs`` processes, started in the order given (list the
+    dearest first, so the processes finish together; a scene that uses every effect's kernels last, so it loads
+    what the others compiled instead of compiling it beside them); 0 if every run exits 0, else 1 (and the
+    failing runs' last lines). The kernels stay compiled either way for the runs that got there."""
     missing = [s for s in scenes if not s.is_file()]
     if missing:
         print(f"error: no such scene: {', '.join(map(str, missing))}", file=sys.stderr)
@@ -45,8 +35,7 @@ def warm_command(scenes: list[Path], jobs: int | None, steps: int, headless: boo
     if not jit.CAN_LOCK:
         jobs = 1  # no lock file on this platform: one process, as numba expects
     jobs = max(1, min(jobs or os.cpu_count() or 1, len(scenes)))
-    order = sorted(scenes, key=cost, reverse=True)
-    print(f"compiling the effects' kernels: {len(order)} scene(s), {steps} ticks each, {jobs} process(es) "
+    print(f"compiling the effects' kernels: {len(scenes)} scene(s), {steps} ticks each, {jobs} process(es) "
           "(about a minute per core on a fresh machine; seconds once cached)", flush=True)
     lock = threading.Lock()
     failures: list[str] = []
@@ -65,7 +54,7 @@ def warm_command(scenes: list[Path], jobs: int | None, steps: int, headless: boo
                 failures.append(f"{scene}: exit {done.returncode}\n    {tail}")
 
     with ThreadPoolExecutor(max_workers=jobs) as pool:
-        list(pool.map(run, order))
+        list(pool.map(run, scenes))
     if failures:
         print("warm-up runs that failed (their kernels compile on first use instead):\n  " + "\n  ".join(failures),
               file=sys.stderr)

@@ -12,7 +12,6 @@ import textwrap
 from pathlib import Path
 
 import numpy as np
-import pytest
 from numba.core import caching
 
 from engine import jit
@@ -110,11 +109,18 @@ def test_processes_compiling_other_signatures_of_one_kernel_at_once_keep_both(tm
     assert done.stdout.split() == ["2", "0"]  # both loaded, none compiled
 
 
-def test_warm_runs_each_scene_and_reports(capsys):
-    scene = ROOT / "configs" / "scenes" / "sandbox.toml"
-    assert main(["warm", str(scene), "--steps", "2", "--no-render", "--jobs", "2"]) == 0
+def test_warm_runs_each_scene_in_the_order_given_and_reports(capsys):
+    scenes = [ROOT / "configs" / "scenes" / name for name in ("sandbox.toml", "dust_devil_showcase.toml")]
+    assert main(["warm", *map(str, scenes), "--steps", "2", "--no-render", "--jobs", "1"]) == 0
     out = capsys.readouterr().out
-    assert "1 scene(s), 2 ticks each, 1 process(es)" in out and "sandbox:" in out and "kernels ready" in out
+    assert "2 scene(s), 2 ticks each, 1 process(es)" in out and "kernels ready" in out
+    assert out.index("sandbox:") < out.index("dust_devil_showcase:")
+    scenes.reverse()
+    assert main(["warm", *map(str, scenes), "--steps", "2", "--no-render", "--jobs", "1"]) == 0
+    out = capsys.readouterr().out
+    assert out.index("dust_devil_showcase:") < out.index("sandbox:")
+    assert main(["warm", str(scenes[1]), "--steps", "2", "--no-render", "--jobs", "2"]) == 0
+    assert "1 scene(s), 2 ticks each, 1 process(es)" in capsys.readouterr().out  # never more processes than scenes
 
 
 def test_warm_names_a_missing_scene_and_a_failing_run(tmp_path, capsys):
@@ -125,10 +131,3 @@ def test_warm_names_a_missing_scene_and_a_failing_run(tmp_path, capsys):
     assert main(["warm", str(broken), "--steps", "1", "--no-render"]) == 1
     err = capsys.readouterr().err
     assert "warm-up runs that failed" in err and "broken.toml" in err
-
-
-@pytest.mark.parametrize("name, expected", [("water_surface_showcase", 73.0), ("my_scene", 1.0)])
-def test_warm_runs_the_dearest_scenes_first(name, expected):
-    from engine.warm import cost
-
-    assert cost(Path(f"{name}.toml")) == expected
