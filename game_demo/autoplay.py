@@ -19,6 +19,7 @@ import numpy as np
 
 from components.energy_wave import EnergyWaveEmitter
 from engine.app import App
+from engine import exact
 from engine.builtin import find_named
 from engine.exact import matmul, matvec
 from engine.input import InputEvent, InputQueue
@@ -141,9 +142,9 @@ class AutoPilot:
         dx, dz = goal[0] - pos[0], goal[2] - pos[2]
         dist = math.hypot(dx, dz)
         f = p.forward()
-        yaw, pitch = math.atan2(-f[0], -f[2]), math.asin(max(-1.0, min(1.0, f[1])))
-        want_yaw = math.atan2(-dx, -dz)
-        want_pitch = math.atan2(goal[1] - pos[1], dist)
+        yaw, pitch = exact.atan2(-f[0], -f[2]), exact.asin(max(-1.0, min(1.0, f[1])))
+        want_yaw = exact.atan2(-dx, -dz)
+        want_pitch = exact.atan2(goal[1] - pos[1], dist)
         err_yaw = (want_yaw - yaw + math.pi) % (2 * math.pi) - math.pi
         err_pitch = want_pitch - pitch
         px = float(np.clip(-math.degrees(err_yaw) / sensitivity, -self.max_turn_px, self.max_turn_px))

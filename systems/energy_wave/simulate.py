@@ -36,6 +36,7 @@ from numpy.typing import NDArray
 
 from components.energy_wave import (BEAM, FRAME, PATTERNS, ROUND_THRESHOLD, EnergyWaveEmitter, EnergyWaveHit,
                                     EnergyWaveState, ParticleBuffer)
+from engine import exact
 from engine.collider import Collider
 from engine.exact import length, matvec
 from engine.impacts import Impact
@@ -457,7 +458,7 @@ def _ball(rng: np.random.Generator, count: int) -> F64:
 def _ball_points(normal: F64, uniform: F64) -> F64:
     """Uniform points in the unit ball from standard normal triples (directions) and uniforms (radii³)."""
     normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), _EPS)
-    return normal * np.cbrt(uniform)[:, None]
+    return normal * exact.cbrt(uniform)[:, None]
 
 
 @dataclass

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from components.toon_smoke import SourceState, ToonSmokeState, ToonSmokeVolumeConfig
+from engine import exact
 from engine.collider import Collider
 from engine.exact import length
 from engine.heightfield import HeightField
@@ -351,7 +352,7 @@ def spawn_positions(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, rng: np.r
         radii = np.array([s.radius for s in active])[which]
         direction = rng.standard_normal((count, 3))
         direction /= np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-12)
-        radius = radii * np.cbrt(rng.random(count))
+        radius = radii * exact.cbrt(rng.random(count))
         points = centres + direction * radius[:, None]
         return np.clip(points, -0.5 * extent, 0.5 * extent)
     return (rng.random((count, 3)) - 0.5) * extent

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from engine import exact
 from engine.exact import matmul, matvec, vecmat
 from engine.spatial import cross, quat_mul
 from systems.water_surface import body_kernels as BK
@@ -59,6 +60,11 @@ def quat_to_matrix(q: F64) -> F64:
     products = (q[:, :, None] * q[:, None, :]).reshape(len(q), 16)
     return ((products[:, _FIRST] * _FIRST_SIGN + products[:, _SECOND] * _SECOND_SIGN) + _IDENTITY9).reshape(
         len(q), 3, 3)
+
+
+def cube(r: F64) -> F64:
+    """r³ as r·r·r: numpy's ``r ** 3`` goes through its ``power``, whose SIMD code differs by CPU (engine.exact)."""
+    return r * r * r
 
 
 def _lattice(n: int) -> F64:
@@ -133,7 +139,7 @@ class BodyArrays:
     @property
     def volume(self) -> F64:
         box = 8.0 * np.multiply.reduce(self.half, axis=1)
-        return np.where(self.shapes == SPHERE, 4.0 / 3.0 * np.pi * self.radius ** 3, box)
+        return np.where(self.shapes == SPHERE, 4.0 / 3.0 * np.pi * cube(self.radius), box)
 
 
 def inertia(bodies: BodyArrays) -> F64:
@@ -256,9 +262,9 @@ def integrate(bodies: BodyArrays, dt: float, water: tuple | None, linear_drag: f
                                        float(density), float(dt)))
     h = dt / steps
     state = np.concatenate((bodies.position, bodies.rotation, bodies.velocity, bodies.spin), axis=1)
-    BK.float_bodies(state, submerged, bodies.shapes, bodies.half, bodies.radius, bodies.radius ** 3, bodies.mass,
-                    bodies.gravity, bodies.force, bodies.torque, np.exp(-bodies.linear_damping * h),
-                    np.exp(-bodies.angular_damping * h), bodies.max_speed, bodies.max_spin, bodies.restitution,
+    BK.float_bodies(state, submerged, bodies.shapes, bodies.half, bodies.radius, cube(bodies.radius), bodies.mass,
+                    bodies.gravity, bodies.force, bodies.torque, exact.exp(-bodies.linear_damping * h),
+                    exact.exp(-bodies.angular_damping * h), bodies.max_speed, bodies.max_spin, bodies.restitution,
                     bodies.friction, steps, float(h), float(dt), water is not None, heights, previous, grid.nx,
                     grid.nz, float(grid.x0), float(grid.z0), float(grid.h), float(grid.y0), float(linear_drag),
                     float(angular_drag), float(density), 0.0 if floor is None else float(floor),
@@ -279,8 +285,8 @@ def integrate_numpy(bodies: BodyArrays, dt: float, water: tuple | None, linear_d
     moments = inertia(bodies)
     volume = bodies.volume
     submerged = np.zeros(len(bodies))
-    decay_v = np.exp(-bodies.linear_damping * h)[:, None]
-    decay_w = np.exp(-bodies.angular_damping * h)[:, None]
+    decay_v = exact.exp(-bodies.linear_damping * h)[:, None]
+    decay_w = exact.exp(-bodies.angular_damping * h)[:, None]
     weight = bodies.mass * bodies.gravity
     limit_speeds(bodies)  # what impulses and scripts gave; each sub-step limits what it adds
     for _ in range(n):  # sub-steps, vectorized over bodies

@@ -190,8 +190,8 @@ def float_bodies(state, submerged, shapes, half, radius, cube, mass, gravity, fo
     and ``limit_speeds``: the same bits.
 
     ``state`` (B, 13): positions, quaternions (w, x, y, z), velocities, spins; updated in place. ``submerged`` (B,)
-    receives the last sub-step's submerged volumes (left as given out of the water). ``cube`` = radius³ (numpy's
-    ``**``), ``decay_v``/``decay_w`` = exp(−damping·h) (numpy's ``exp``). ``in_water``: ``heights``/``previous``
+    receives the last sub-step's submerged volumes (left as given out of the water). ``cube`` = radius³ (``bodies.cube``),
+    ``decay_v``/``decay_w`` = exp(−damping·h) (``engine.exact.exp``). ``in_water``: ``heights``/``previous``
     (nz, nx) z(t) and z(t − 1) of a grid of ``nx`` × ``nz`` vertices, spacing ``gh``, P[0, 0] at (x0, z0), rest level
     ``y0``; ``floor`` the pool's floor. ``samples`` (9, S): the box lattice and sphere columns (coordinate-major,
     in half extents / radii), their shares of the volume, the columns' chords; ``box_samples`` the lattice's size

@@ -17,6 +17,7 @@ import math
 
 import numpy as np
 
+from engine.exact import atan2_scalar
 from engine.jit import kernel, pairwise_sum
 
 # Constants of outline.py / geometry.py, repeated as plain numbers for the compiled code.
@@ -309,7 +310,7 @@ def box_sections(corners, plane_y, edge_a, edge_b, shared_face, x0, z0, h, polyg
             buf[e] = v[e] if valid[e] else 0.0
         cv = (0.0 + pairwise_sum(buf, 0, ne)) * inv
         for e in range(ne):  # stable insertion sort by angle (inf for the edges that do not straddle)
-            a = math.atan2(v[e] - cv, u[e] - cu) if valid[e] else np.inf
+            a = atan2_scalar(v[e] - cv, u[e] - cu) if valid[e] else np.inf
             k = e
             while k > 0 and angle[k - 1] > a:
                 angle[k] = angle[k - 1]

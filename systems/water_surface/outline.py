@@ -21,7 +21,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from engine.exact import matmul
+from engine.exact import atan2, matmul
 from systems.water_surface.geometry import (BOX, EPS_LINE, F64, I64, NUDGE, Bodies, Grid, all_of, any_of, max_of,
                                             min_of, ranges, sum_of)
 
@@ -229,7 +229,7 @@ def _sort_ccw(u: F64, v: F64, valid: np.ndarray, exact: bool) -> tuple[F64, I64,
     inv = 1.0 / np.maximum(n, 1)
     cu = sum_of(np.where(valid, u, 0.0), axis=1) * inv
     cv = sum_of(np.where(valid, v, 0.0), axis=1) * inv
-    angle = np.where(valid, np.arctan2(v - cv[:, None], u - cu[:, None]), np.inf)
+    angle = np.where(valid, atan2(v - cv[:, None], u - cu[:, None]), np.inf)
     order = angle.argsort(axis=1, kind="stable")[:, :_MAX_BOX_VERTICES]
     flat = order + (u.shape[1] * np.arange(len(u)))[:, None]
     polygons = np.empty(flat.shape + (2,))

@@ -26,6 +26,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from engine import exact
 from systems.water_surface.geometry import F64, I64, Grid, ranges, sum_of
 
 __all__ = ["courant_k", "dents", "free_degree", "neighbour_sum", "neighbour_table", "propagate"]
@@ -184,7 +185,7 @@ def dents(grid: Grid, centres_uv: F64, heights: F64, radius: float) -> tuple[I64
     dv, du = np.divmod(offset, np.maximum(width[drop, 0], 1))
     i, j = lo_c[drop, 0] + du, lo_c[drop, 1] + dv
     r2 = (i - centres_uv[drop, 0]) ** 2 + (j - centres_uv[drop, 1]) ** 2
-    change = -heights[drop] * np.exp(-r2 / (r * r))
+    change = -heights[drop] * exact.exp(-r2 / (r * r))
     flat = j * grid.nx + i
     touched, inverse = np.unique(flat, return_inverse=True)
     return touched, np.bincount(inverse, change, len(touched))

@@ -1,9 +1,12 @@
 """engine.exact: the products agree with numpy's to rounding, sum in the documented order, and a whole game gives
-the same state hash whichever BLAS kernels numpy's OpenBLAS picks for the CPU."""
+the same state hash whichever BLAS kernels numpy's OpenBLAS picks for the CPU; the elementary functions are within
+an ulp, give the same bits compiled and interpreted, and keep the demo's hash whatever SIMD code numpy picks."""
 
 from __future__ import annotations
 
+import math
 import os
+import platform
 import subprocess
 import sys
 from pathlib import Path
@@ -11,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from engine import exact
 from engine.exact import dot, inverse, length, matmul, matvec, vecmat
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -75,4 +79,109 @@ def test_the_demo_hash_is_the_same_with_other_blas_kernels():
         env = {**os.environ, "OPENBLAS_CORETYPE": core}
         out = subprocess.run(cmd, capture_output=True, text=True, check=True, cwd=ROOT, env=env)
         hashes.append(out.stdout.strip().splitlines()[-1])
+    assert hashes[0] == hashes[1]
+
+
+# ------------------------------------------------------------------------------------- elementary functions
+def _ulps(a, b) -> np.ndarray:
+    """Units in the last place between float64 arrays (ordered as integers across the sign)."""
+    ia, ib = (np.asarray(x, dtype=np.float64).view(np.int64) for x in (a, b))
+    ia, ib = (np.where(i < 0, np.int64(-2**63) - i, i) for i in (ia, ib))
+    return np.abs(ia - ib)
+
+
+def _inputs() -> dict[str, np.ndarray]:
+    rng = np.random.default_rng(7)
+    n = 20000
+    signs = rng.choice([-1.0, 1.0], n)
+    return {"exp": np.concatenate([rng.uniform(-745.0, 709.7, n), rng.uniform(-1.0, 1.0, n),
+                                   rng.uniform(-1e-8, 1e-8, 100)]),
+            "atan": np.concatenate([rng.uniform(-5.0, 5.0, n), signs * np.exp(rng.uniform(-60.0, 60.0, n))]),
+            "asin": rng.uniform(-1.0, 1.0, n),
+            "cbrt": np.concatenate([rng.uniform(-1e3, 1e3, 300), signs[:300] * np.exp(rng.uniform(-700, 700, 300)),
+                                    [5e-324, 1e-310, 27.0, -8.0, 1e300]]),
+            "atan2": np.stack([rng.standard_normal(n) * np.exp(rng.uniform(-5, 5, n)),
+                               rng.standard_normal(n) * np.exp(rng.uniform(-5, 5, n))])}
+
+
+def test_elementary_functions_are_within_an_ulp_of_the_true_value():
+    """exp, atan and atan2 against the C library's (which is within an ulp itself: so at most 1 apart), asin
+    within 2; the cube root against the exact root (decimal arithmetic), where glibc's own errs by 2 ulps."""
+    from decimal import Decimal, getcontext
+
+    data = _inputs()
+    for name in ("exp", "atan", "asin"):
+        got = getattr(exact, name)(data[name])
+        want = np.array([getattr(math, name)(x) for x in data[name]])
+        assert _ulps(got, want).max() <= (2 if name == "asin" else 1), name
+    y, x = data["atan2"]
+    assert _ulps(exact.atan2(y, x), [math.atan2(a, b) for a, b in zip(y, x)]).max() <= 1
+    getcontext().prec = 50
+    third = Decimal(1) / Decimal(3)
+    for v in data["cbrt"]:
+        got = float(exact.cbrt(float(v)))
+        true = (Decimal(abs(float(v))) ** third).copy_sign(Decimal(float(v)))
+        assert abs((Decimal(got) - true) / Decimal(math.ulp(got))) < 0.67, v  # fdlibm's bound: 0.667
+
+
+def test_elementary_functions_special_values_as_the_c_library():
+    specials = [0.0, -0.0, 1.0, -1.0, 0.5, -2.0, math.inf, -math.inf, math.nan, 5e-324, -5e-324, 1e308, -1e308]
+
+    def same(a: float, b: float) -> bool:
+        return (math.isnan(a) and math.isnan(b)) or (a == b and math.copysign(1.0, a) == math.copysign(1.0, b))
+
+    for y in specials:
+        for x in specials:
+            assert same(exact.atan2(y, x), math.atan2(y, x)), (y, x)
+        assert same(exact.atan(y), math.atan(y)), y
+        assert same(exact.cbrt(y), math.cbrt(y)) or abs(_ulps(exact.cbrt(y), math.cbrt(y))) <= 2, y
+    for x in specials + [709.78, 710.0, -745.0, -746.0, 1e-300]:
+        want = math.inf if x > 709.79 else math.exp(x)
+        assert _ulps(exact.exp(x), want) <= 1 or same(exact.exp(x), want), x
+    assert exact.exp(710.0) == math.inf and exact.exp(-746.0) == 0.0 and math.isnan(exact.exp(math.nan))
+    assert math.isnan(exact.asin(1.5)) and exact.asin(1.0) == math.asin(1.0) and same(exact.asin(-0.0), -0.0)
+
+
+def test_elementary_functions_take_numbers_and_arrays_alike():
+    x = np.array([[0.25, -3.0], [7.5, 1e-3]])
+    for name in ("exp", "cbrt", "atan"):
+        arr = getattr(exact, name)(x)
+        assert arr.shape == x.shape and arr.dtype == np.float64
+        assert [getattr(exact, name)(float(v)) for v in x.ravel()] == arr.ravel().tolist()
+        assert isinstance(getattr(exact, name)(0.5), float)
+    assert exact.atan2(x, 2.0).tolist() == [[exact.atan2(float(v), 2.0) for v in row] for row in x]
+
+
+_BITS = """
+import hashlib, numpy as np
+from tests.engine.test_exact import _inputs
+from engine import exact
+data = _inputs()
+out = [getattr(exact, n)(data[n]) for n in ("exp", "atan", "asin", "cbrt")] + [exact.atan2(*data["atan2"])]
+print(hashlib.sha256(b"".join(np.ascontiguousarray(o).tobytes() for o in out)).hexdigest())
+"""
+
+
+def test_elementary_functions_give_the_same_bits_compiled_and_as_plain_python():
+    """The compiled kernels against the same code run as Python floats (``NUMBA_DISABLE_JIT``), whose ``+ - * /``
+    round each operation alone: LLVM neither fused a multiply-add nor reordered a sum."""
+    results = []
+    for env in ({}, {"NUMBA_DISABLE_JIT": "1"}):
+        out = subprocess.run([sys.executable, "-c", _BITS], capture_output=True, text=True, check=True, cwd=ROOT,
+                             env={**os.environ, **env, "PYTHONPATH": str(ROOT)})
+        results.append(out.stdout.strip())
+    assert results[0] == results[1]
+
+
+@pytest.mark.skipif(platform.machine().lower() not in ("x86_64", "amd64"), reason="x86 SIMD levels")
+def test_the_demo_hash_is_the_same_with_numpys_simd_code_limited_to_its_baseline():
+    """numpy picks the SIMD code of ``exp``, ``cbrt``, ``arctan2``, ``power``... by the CPU; on one with AVX-512 the
+    demo's autoplay gave another hash than with that code turned off (``NPY_DISABLE_CPU_FEATURES``) until the
+    simulation used engine.exact's functions. On a CPU without AVX2 or AVX-512 both runs are the same run."""
+    cmd = [sys.executable, "-m", "game_demo", "--headless", "--autoplay", "--no-render", "--seed", "3"]
+    runs = [subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, cwd=ROOT,
+                             env={**os.environ, **env})
+            for env in ({}, {"NPY_DISABLE_CPU_FEATURES": "X86_V3 X86_V4 AVX512_ICL AVX512_SPR"})]
+    hashes = [run.communicate(timeout=300)[0].strip().splitlines()[-1] for run in runs]
+    assert all(run.returncode == 0 for run in runs)
     assert hashes[0] == hashes[1]

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from engine import exact
 from components.water_surface import STABILITY_LIMIT
 from systems.water_surface.surface import step_water
 from systems.water_surface.waves import courant_k, free_degree, neighbour_sum, propagate
@@ -147,7 +148,7 @@ def _dents_unclipped(grid, centres_uv, heights, radius):
     i, j = lo[drop, 0] + du, lo[drop, 1] + dv
     ok = (i >= 0) & (i < grid.nx) & (j >= 0) & (j < grid.nz)
     drop, i, j = drop[ok], i[ok], j[ok]
-    change = -heights[drop] * np.exp(-((i - centres_uv[drop, 0]) ** 2 + (j - centres_uv[drop, 1]) ** 2) / (r * r))
+    change = -heights[drop] * exact.exp(-((i - centres_uv[drop, 0]) ** 2 + (j - centres_uv[drop, 1]) ** 2) / (r * r))
     touched, inverse = np.unique(j * grid.nx + i, return_inverse=True)
     return touched, np.bincount(inverse, change, len(touched))
 
