@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from engine.exact import asin
 from systems.grass_field.lod import CameraInput, _azimuth, _horizontal_half_angle, wrap_angle
 
 __all__ = ["cull_cells", "frustum_planes", "spheres_inside", "visible_plants"]
@@ -40,7 +41,7 @@ def cull_cells(centres: np.ndarray, camera: CameraInput, *, cell_radius: float, 
     rel = centres[:, [0, 2]] - camera.position[[0, 2]]
     dist = np.sqrt(np.einsum("ij,ij->i", rel, rel))
     angle = np.abs(wrap_angle(_azimuth(rel) - _azimuth(fwd)))
-    angular_radius = np.arcsin(np.clip(cell_radius / np.maximum(dist, 1e-9), 0.0, 1.0))
+    angular_radius = asin(np.clip(cell_radius / np.maximum(dist, 1e-9), 0.0, 1.0))
     keep = angle <= theta + angular_radius
     keep |= (dist <= near_distance) & (angle <= 2.0 * theta)
     if viewer_cell is not None and 0 <= viewer_cell < len(keep):

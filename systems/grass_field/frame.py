@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from engine.exact import asin, atan2
 from components.grass_field import GrassFieldConfig
 from systems.grass_field import kernels
 from systems.grass_field.culling import cull_cells, frustum_planes, visible_plants
@@ -74,8 +75,8 @@ def band_sector_content(data: FieldData, centre_cell: int, apothem: float) -> np
         return np.zeros(N_BAND_SIDES, dtype=bool)
     rel = centres[far] - origin
     dist = np.linalg.norm(rel, axis=1)
-    az = np.arctan2(rel[:, 1], rel[:, 0])
-    margin = np.pi / N_BAND_SIDES + np.arcsin(np.clip(data.cell_radius / dist, 0.0, 1.0))
+    az = atan2(rel[:, 1], rel[:, 0])
+    margin = np.pi / N_BAND_SIDES + asin(np.clip(data.cell_radius / dist, 0.0, 1.0))
     sides = np.arange(N_BAND_SIDES) * (2.0 * np.pi / N_BAND_SIDES)
     return (np.abs(wrap_angle(az[None, :] - sides[:, None])) <= margin[None, :]).any(axis=1)
 
@@ -139,9 +140,9 @@ def plan_frame(cfg: GrassFieldConfig, data: FieldData, camera: CameraInput, orie
 
     active = levels == 4
     rel = placed.cell_centre[:, [0, 2]] - camera.position[[0, 2]]
-    to_eye = np.arctan2(-rel[:, 1], -rel[:, 0])
+    to_eye = atan2(-rel[:, 1], -rel[:, 0])
     if camera.ortho_pixels_per_unit is not None:
-        to_eye = np.full(len(rel), np.arctan2(-camera.forward[2], -camera.forward[0]))
+        to_eye = np.full(len(rel), atan2(-camera.forward[2], -camera.forward[0]))
     orientation.update(to_eye, active, np.radians(cfg.face_turn_deg), np.radians(cfg.image_switch_deg))
     impostors = np.flatnonzero(active)
     rel_eye = placed.cell_centre[impostors] - camera.position
@@ -215,7 +216,7 @@ def _plan_compiled(cfg: GrassFieldConfig, data: FieldData, camera: CameraInput, 
     orientation.swaps += swaps
     if cfg.blend_views:
         rel = placed.cell_centre[impostors][:, [0, 2]] - eye[[0, 2]]
-        a, b, blend = nearest_views(np.arctan2(-rel[:, 1], -rel[:, 0]))
+        a, b, blend = nearest_views(atan2(-rel[:, 1], -rel[:, 0]))
         turn = data.cell_turn[impostors]
         views = np.stack([np.mod(a - 3 * turn, 12), np.mod(b - 3 * turn, 12)], axis=1)
     else:

@@ -10,7 +10,8 @@ a few hundred elements).  These kernels do the same arithmetic in the same order
 - :func:`orient_impostors`: the level-4 rectangles' 15° / 30° rules (section 5) and their draw order.
 
 The tests compare every kernel's results with the numpy functions' (``plan_frame(..., compiled=False)``).
-Transcendental functions are float64, as everywhere; no fastmath.
+Transcendental functions are float64, as everywhere; no fastmath. Angles come from engine.exact's ``atan2`` and
+``asin``, as in the numpy functions, so both give the same bits on every CPU.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import math
 
 import numpy as np
 
+from engine.exact import asin_scalar, atan2_scalar
 from engine.jit import kernel
 
 TWO_PI = 2.0 * np.pi
@@ -45,17 +47,17 @@ def cell_levels(centres, lod_points, eye, fwd_xz, theta, cell_radius, near_dista
     """
     n = centres.shape[0]
     out = np.empty(n, dtype=np.int64)
-    fwd_azimuth = math.atan2(fwd_xz[1], fwd_xz[0])
+    fwd_azimuth = atan2_scalar(fwd_xz[1], fwd_xz[0])
     width_length, tan_half = pixel_scale
     vx, vz = centres[viewer, 0], centres[viewer, 2]
     for c in range(n):
         rx = centres[c, 0] - eye[0]
         rz = centres[c, 2] - eye[2]
         dist = math.sqrt(rx * rx + rz * rz)
-        angle = abs(_wrap(math.atan2(rz, rx) - fwd_azimuth))
+        angle = abs(_wrap(atan2_scalar(rz, rx) - fwd_azimuth))
         ratio = cell_radius / max(dist, 1e-9)
         ratio = min(max(ratio, 0.0), 1.0)
-        keep = angle <= theta + math.asin(ratio)
+        keep = angle <= theta + asin_scalar(ratio)
         if not keep:
             keep = dist <= near_distance and angle <= 2.0 * theta
         if not keep and c != viewer:
@@ -187,7 +189,7 @@ def orient_impostors(levels, centres, eye, face, image, face_step, image_step, c
             image[c] = np.nan
             continue
         active += 1
-        angle = math.atan2(-(centres[c, 2] - eye[2]), -(centres[c, 0] - eye[0])) % TWO_PI
+        angle = atan2_scalar(-(centres[c, 2] - eye[2]), -(centres[c, 0] - eye[0])) % TWO_PI
         nearest = (np.rint(angle / step) % N_VIEWS) * step
         if np.isnan(face[c]):
             face[c] = angle

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from engine.exact import atan2
 from engine.spatial import cross
 
 __all__ = ["CameraInput", "camera_from_view", "pseudo_pixels", "level_from_pixels", "switch_distances",
@@ -150,7 +151,7 @@ def visible_band_sides(camera: CameraInput, centre_xz: np.ndarray, apothem: floa
 # ---------------------------------------------------------------------------------------- selection
 def _azimuth(xz: np.ndarray) -> np.ndarray:
     xz = np.asarray(xz, dtype=np.float64)
-    return np.arctan2(xz[..., 1], xz[..., 0])
+    return atan2(xz[..., 1], xz[..., 0])
 
 
 def wrap_angle(a: np.ndarray) -> np.ndarray:
