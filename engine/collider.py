@@ -17,7 +17,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from engine.exact import dot
 from engine.heightfield import HeightField
-from engine.jit import kernel
+from engine.jit import kernel, maximum, minimum
 from engine.spatial import Transform, quat_conjugate, quat_is_identity, quat_rotate
 
 __all__ = ["Collider", "ColliderShape", "RayHits"]
@@ -443,8 +443,8 @@ def field_height(heights: F64, ox: float, oz: float, spacing: float, x: float, z
     """HeightField.height_at for one point, in its operations (clip, floor, bilinear blend): for kernels that
     sample a height field (the collider's ray casts, the toon smoke's solid cells)."""
     rows, cols = heights.shape
-    gx = _min(_max((x - ox) / spacing, 0.0), float(cols - 1))
-    gz = _min(_max((z - oz) / spacing, 0.0), float(rows - 1))
+    gx = minimum(maximum((x - ox) / spacing, 0.0), float(cols - 1))
+    gz = minimum(maximum((z - oz) / spacing, 0.0), float(rows - 1))
     c0 = min(int(gx), cols - 2)
     r0 = min(int(gz), rows - 2)
     tx, tz = gx - c0, gz - r0
@@ -482,10 +482,10 @@ def _ray_height_gap(o: F64, d: F64, i: int, t: float, heights: F64, ox: float, o
 def _field_normal(heights: F64, ox: float, oz: float, spacing: float, x_lo: float, x_hi: float, z_lo: float,
                   z_hi: float, x: float, z: float) -> tuple[float, float, float]:
     """HeightField.normal_at for one point: central differences over ±spacing/2, normalised as np.linalg.norm."""
-    x, z = _min(_max(x, x_lo), x_hi), _min(_max(z, z_lo), z_hi)
+    x, z = minimum(maximum(x, x_lo), x_hi), minimum(maximum(z, z_lo), z_hi)
     e = 0.5 * spacing
-    xa, xb = _max(x - e, x_lo), _min(x + e, x_hi)
-    za, zb = _max(z - e, z_lo), _min(z + e, z_hi)
+    xa, xb = maximum(x - e, x_lo), minimum(x + e, x_hi)
+    za, zb = maximum(z - e, z_lo), minimum(z + e, z_hi)
     dhdx = (field_height(heights, ox, oz, spacing, xb, z) - field_height(heights, ox, oz, spacing, xa, z)) / (xb - xa)
     dhdz = (field_height(heights, ox, oz, spacing, x, zb) - field_height(heights, ox, oz, spacing, x, za)) / (zb - za)
     nx, nz = -dhdx, -dhdz
@@ -503,7 +503,7 @@ def _slab_interval(o: float, d: float, lo: float, hi: float) -> tuple[float, flo
         return np.inf, -np.inf
     inv = 1.0 / d
     t1, t2 = (lo - o) * inv, (hi - o) * inv
-    return _min(t1, t2), _max(t1, t2)
+    return minimum(t1, t2), maximum(t1, t2)
 
 
 @kernel
@@ -512,7 +512,7 @@ def _heightfield_interval_kernel(o: F64, d: F64, lo: F64, hi: F64, max_t: float
     """Collider._heightfield_interval for every ray in one pass: [t_start, t_end] inside the box lo..hi and
     [0, max_t], whether it is non-empty (and the ray has a direction), and the longest horizontal travel over the
     active rays (at least 0; NaN when any ray's is NaN, as numpy's max). Its axis reductions run in their order,
-    0, 1, 2, with numpy's max/min semantics (:func:`_max`, :func:`_min`), so the values are the same bits."""
+    0, 1, 2, with numpy's max/min semantics (engine.jit's ``maximum`` and ``minimum``), so the values are the same bits."""
     n = o.shape[0]
     t_start, t_end, active = np.empty(n), np.empty(n), np.empty(n, np.bool_)
     longest = 0.0
@@ -520,11 +520,11 @@ def _heightfield_interval_kernel(o: F64, d: F64, lo: F64, hi: F64, max_t: float
         near0, far0 = _slab_interval(o[i, 0], d[i, 0], lo[0], hi[0])
         near1, far1 = _slab_interval(o[i, 1], d[i, 1], lo[1], hi[1])
         near2, far2 = _slab_interval(o[i, 2], d[i, 2], lo[2], hi[2])
-        start = _max(_max(_max(near0, near1), near2), 0.0)
-        end = _min(_min(_min(far0, far1), far2), max_t)
+        start = maximum(maximum(maximum(near0, near1), near2), 0.0)
+        end = minimum(minimum(minimum(far0, far1), far2), max_t)
         live = start <= end and (d[i, 0] != 0.0 or d[i, 1] != 0.0 or d[i, 2] != 0.0)
         t_start[i], t_end[i], active[i] = start, end, live
-        longest = _max(longest, math.hypot(d[i, 0], d[i, 2]) * (end - start if live else 0.0))
+        longest = maximum(longest, math.hypot(d[i, 0], d[i, 2]) * (end - start if live else 0.0))
     return t_start, t_end, active, longest
 
 
@@ -592,28 +592,16 @@ def _heightfield_march_kernel(o: F64, d: F64, t_start: F64, t_end: F64, active: 
 # One pass over the rows, the same float operations in the same order as the numpy code above (quat_rotate,
 # _box_distance, _unit, _ray_box and ray_cast's inside test), so the results are the same bits; numpy's
 # maximum/minimum/clip semantics (NaN propagates; of equal values, e.g. -0.0 and 0.0, the second operand) are
-# kept by _max and _min. Measured (thread_time, one process, numpy and kernel alternated): 100k rows of a rotated
+# kept by engine.jit's maximum and minimum. Measured (thread_time, one process, numpy and kernel alternated): 100k rows of a rotated
 # box, ray_cast 55.8 -> 5.4 ms and query 34.9 -> 4.8 ms median; in the energy wave's 105k-particle step
 # (~4.5k rows cast/queried) the collider calls 2.0-2.2 -> 0.22 ms median.
-
-
-@kernel(inline="always")
-def _max(a: float, b: float) -> float:
-    """np.maximum(a, b): NaN propagates; of equal values (±0) the second."""
-    return a if (a > b or a != a) else b
-
-
-@kernel(inline="always")
-def _min(a: float, b: float) -> float:
-    """np.minimum(a, b): NaN propagates; of equal values (±0) the second."""
-    return a if (a < b or a != a) else b
 
 
 @kernel(inline="always")
 def _first_max_axis(a: float, b: float, c: float) -> int:
     """_first_max for one row: argmax of (a, b, c), the first of equal maxima."""
     axis = 1 if b > a else 0
-    if c > _max(a, b):
+    if c > maximum(a, b):
         axis = 2
     return axis
 
@@ -633,13 +621,13 @@ def _box_row(px: float, py: float, pz: float, hx: float, hy: float, hz: float
              ) -> tuple[float, float, float, float]:
     """Collider._box_distance for one local point: the exact box SDF (Quilez) and the outward unit normal."""
     q0, q1, q2 = abs(px) - hx, abs(py) - hy, abs(pz) - hz
-    m0, m1, m2 = _max(q0, 0.0), _max(q1, 0.0), _max(q2, 0.0)
+    m0, m1, m2 = maximum(q0, 0.0), maximum(q1, 0.0), maximum(q2, 0.0)
     outside = np.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
-    distance = outside + _min(_max(_max(q0, q1), q2), 0.0)
+    distance = outside + minimum(maximum(maximum(q0, q1), q2), 0.0)
     if outside > 0.0:  # from the nearest box point clamp(p, -h, h) to p, as _unit does it
-        vx = px - _min(_max(px, -hx), hx)
-        vy = py - _min(_max(py, -hy), hy)
-        vz = pz - _min(_max(pz, -hz), hz)
+        vx = px - minimum(maximum(px, -hx), hx)
+        vy = py - minimum(maximum(py, -hy), hy)
+        vz = pz - minimum(maximum(pz, -hz), hz)
         norm = np.sqrt(vx * vx + vy * vy + vz * vz)
         if norm > 0.0:
             return distance, vx / norm, vy / norm, vz / norm
@@ -663,7 +651,7 @@ def _box_query_kernel(points: F64, position: F64, q: F64, inverse: F64, h: F64) 
                              points[i, 1] - position[1], points[i, 2] - position[2])
         d, nx, ny, nz = _box_row(lx, ly, lz, h[0], h[1], h[2])
         distance[i] = d
-        depth[i] = _max(0.0, -d)
+        depth[i] = maximum(0.0, -d)
         normal[i, 0], normal[i, 1], normal[i, 2] = _rotate(q[0], q[1], q[2], q[3], nx, ny, nz)
     return distance, depth, normal
 
@@ -677,7 +665,7 @@ def _slab(o: float, d: float, h: float) -> tuple[float, float]:
         return np.inf, -np.inf
     inv = 1.0 / d
     t1, t2 = (-h - o) * inv, (h - o) * inv
-    return _min(t1, t2), _max(t1, t2)
+    return minimum(t1, t2), maximum(t1, t2)
 
 
 @kernel
@@ -694,8 +682,8 @@ def _box_ray_cast_kernel(origins: F64, dirs: F64, position: F64, q: F64, inverse
         a0, b0 = _slab(ox, dx, h[0])
         a1, b1 = _slab(oy, dy, h[1])
         a2, b2 = _slab(oz, dz, h[2])
-        t_near = _max(_max(a0, a1), a2)
-        t_far = _min(_min(b0, b1), b2)
+        t_near = maximum(maximum(a0, a1), a2)
+        t_far = minimum(minimum(b0, b1), b2)
         distance, nx, ny, nz = _box_row(ox, oy, oz, h[0], h[1], h[2])
         if distance < 0.0:
             hit[i], t[i] = True, 0.0

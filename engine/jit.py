@@ -111,8 +111,23 @@ def _locked(folder: str, shared: bool) -> Iterator[None]:
         os.close(fd)  # closing the descriptor releases the lock
 
 
+# ----------------------------------------------------------------------------------- numpy's element rules
+# Kernels that repeat numpy's element-wise and reduction semantics bit for bit (the effects' kernels share them).
+
+
+@kernel(inline="always")
+def maximum(a: float, b: float) -> float:
+    """np.maximum(a, b) of two floats: NaN propagates; of equal values (0.0 and −0.0) the second."""
+    return a if (a > b or a != a) else b
+
+
+@kernel(inline="always")
+def minimum(a: float, b: float) -> float:
+    """np.minimum(a, b) of two floats: NaN propagates; of equal values (0.0 and −0.0) the second."""
+    return a if (a < b or a != a) else b
+
+
 # --------------------------------------------------------------------------------------------- summation
-# Kernels that repeat a numpy reduction bit for bit (the effects' kernels share them).
 
 
 @kernel

@@ -23,6 +23,7 @@ from pathlib import Path
 
 from engine import jit
 
+
 def warm_command(scenes: list[Path], jobs: int | None, steps: int, headless: bool = True) -> int:
     """Run ``scenes`` for ``steps`` ticks each in up to ``jobs`` processes, started in the order given (list the
     dearest first, so the processes finish together; a scene that uses every effect's kernels last, so it loads

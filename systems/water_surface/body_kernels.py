@@ -27,34 +27,13 @@ import math
 
 import numpy as np
 
-from engine.jit import kernel
-from engine.jit import pairwise_sum
+from engine.jit import kernel, maximum, minimum, pairwise_sum
 
 BOX, SPHERE = 0, 1  # geometry.BOX / SPHERE
 OMEGA_DT = 0.3  # bodies._OMEGA_DT
 SPHERE_VOLUME = 4.0 / 3.0 * np.pi  # the factor of r³ in BodyArrays.volume, as Python computes it
 POSITION, ROTATION, VELOCITY, SPIN = 0, 3, 7, 10  # columns of the state (B, 13)
 SUMS = 8  # sums per body over its samples: V, V·w, F (3), τ (3)
-
-
-@kernel
-def _maximum(a, b):
-    """np.maximum of two floats: NaN if either is, else the larger, ``b`` on a tie (max(0.0, −0.0) is −0.0)."""
-    if a != a:
-        return a
-    if b != b:
-        return b
-    return a if a > b else b
-
-
-@kernel
-def _minimum(a, b):
-    """np.minimum of two floats: NaN if either is, else the smaller, ``b`` on a tie."""
-    if a != a:
-        return a
-    if b != b:
-        return b
-    return a if a < b else b
 
 
 @kernel
@@ -71,7 +50,7 @@ def _limit(state, b, column, limit):
     if x * x + y * y + z * z <= limit * limit:
         return
     if math.isfinite(x) and math.isfinite(y) and math.isfinite(z):
-        big = _maximum(_maximum(abs(x), abs(y)), abs(z))
+        big = maximum(maximum(abs(x), abs(y)), abs(z))
         ux, uy, uz = x / big, y / big, z / big
         scale = limit / (big * math.sqrt(ux * ux + uy * uy + uz * uz))
         state[b, column], state[b, column + 1], state[b, column + 2] = x * scale, y * scale, z * scale
@@ -108,10 +87,10 @@ def substep_rate(shapes, half, radius, mass, gravity, density, dt):
     top = 0.0
     for b in range(len(mass)):
         h0, h1, h2 = half[b, 0], half[b, 1], half[b, 2]
-        faces = 4.0 * _maximum(_maximum(h0 * h1, h1 * h2), h0 * h2)
+        faces = 4.0 * maximum(maximum(h0 * h1, h1 * h2), h0 * h2)
         area = np.pi * (radius[b] * radius[b]) if shapes[b] == SPHERE else faces
-        omega = math.sqrt(density * _maximum(gravity[b], 1e-9) * area / mass[b])
-        top = omega if b == 0 else _maximum(top, omega)
+        omega = math.sqrt(density * maximum(gravity[b], 1e-9) * area / mass[b])
+        top = omega if b == 0 else maximum(top, omega)
     return top * dt / OMEGA_DT
 
 
@@ -145,8 +124,8 @@ def _water_forces(state, b, rot, shapes, half, radius, volume, gravity, samples,
         u = (px + ox - x0) / gh
         v = (pz + oz - z0) / gh
         wet = u >= 0.0 and u <= nx - 1 and v >= 0.0 and v <= nz - 1
-        cu = _minimum(_maximum(u, 0.0), float(gx - 1))
-        cv = _minimum(_maximum(v, 0.0), float(gz - 1))
+        cu = minimum(maximum(u, 0.0), float(gx - 1))
+        cv = minimum(maximum(v, 0.0), float(gz - 1))
         if cu != cu or cv != cv:  # numpy's lookup fails here too (an index out of bounds)
             raise ValueError("a floating body's position is not a number")
         i = min(int(cu), gx - 2)
@@ -163,7 +142,7 @@ def _water_forces(state, b, rot, shapes, half, radius, volume, gravity, samples,
         o_bottom = o00 + tu * (o10 - o00)
         o_top = o01 + tu * (o11 - o01)
         before = o_bottom + tv * (o_top - o_bottom)
-        frac = _minimum(_maximum((y0 + eta - y) / s + 0.5, 0.0), 1.0) * (1.0 if wet else 0.0)
+        frac = minimum(maximum((y0 + eta - y) / s + 0.5, 0.0), 1.0) * (1.0 if wet else 0.0)
         sub = frac * dv
         push = rho_g * sub
         fx, fz = push * du / -gh, push * dz / -gh
@@ -370,7 +349,7 @@ def _pool_contacts(state, shapes, half, radius, mass, restitution, friction, nx,
                 r1 = r1 + (arms[p, c, 1] if inside else 0.0)
                 r2 = r2 + (arms[p, c, 2] if inside else 0.0)
                 deepest = depth[p, c] if inside else 0.0
-                push = deepest if c == 0 else _maximum(push, deepest)
+                push = deepest if c == 0 else maximum(push, deepest)
             share = float(max(count, 1))
             r0, r1, r2 = r0 / share, r1 / share, r2 / share  # the contact's arm
             c0, c1, c2 = v0 + (w1 * r2 - w2 * r1), v1 + (w2 * r0 - w0 * r2), v2 + (w0 * r1 - w1 * r0)
@@ -383,7 +362,7 @@ def _pool_contacts(state, shapes, half, radius, mass, restitution, friction, nx,
             jn = -(1.0 + restitution[b]) * vn / k if count > 0 and vn < 0.0 else 0.0
             t0, t1, t2 = c0 - vn * n0, c1 - vn * n1, c2 - vn * n2
             speed = math.sqrt(_sum3(t0 * t0, t1 * t1, t2 * t2))
-            jt = _minimum(friction[b] * jn, speed / k)
+            jt = minimum(friction[b] * jn, speed / k)
             unit = speed if speed > 0.0 else 1.0
             i0, i1, i2 = jn * n0 - jt * (t0 / unit), jn * n1 - jt * (t1 / unit), jn * n2 - jt * (t2 / unit)
             j0, j1, j2 = j0 + i0, j1 + i1, j2 + i2
