@@ -11,11 +11,10 @@ import numpy as np
 from pydantic import ValidationError
 
 from components.toon_smoke import SmokeSourceConfig, SourceState, ToonSmokeState, ToonSmokeVolumeConfig
-from engine import exact
 from engine.config import ConfigError, model_problems, suggest
 from engine.spatial import Transform, quat_conjugate, quat_rotate
 from engine.world import World
-from systems.toon_smoke.simulate import _geometry
+from systems.toon_smoke.simulate import _geometry, ball_points
 
 
 def _volume(world: World, entity: int, volume: int | str | None) -> tuple[int, ToonSmokeVolumeConfig,
@@ -88,8 +87,6 @@ def puff(world: World, entity: int, position=None, radius: float = 0.6, density:
     if count:
         rng = world.random.stream("toon_smoke", target)
         oldest = np.argsort(-state.particle_age, kind="stable")[:count]
-        direction = rng.standard_normal((count, 3))
-        direction /= np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-12)
-        points = centre + direction * (radius * exact.cbrt(rng.random(count)))[:, None]
+        points = ball_points(rng, centre, radius, count)
         state.particles[oldest] = np.clip(points, -0.5 * geo.extent, 0.5 * geo.extent)
         state.particle_age[oldest] = 0.0

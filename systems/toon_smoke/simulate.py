@@ -350,12 +350,16 @@ def spawn_positions(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, rng: np.r
         which = rng.integers(0, len(active), count)
         centres = np.array([s.position for s in active])[which]
         radii = np.array([s.radius for s in active])[which]
-        direction = rng.standard_normal((count, 3))
-        direction /= np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-12)
-        radius = radii * exact.cbrt(rng.random(count))
-        points = centres + direction * radius[:, None]
-        return np.clip(points, -0.5 * extent, 0.5 * extent)
+        return np.clip(ball_points(rng, centres, radii, count), -0.5 * extent, 0.5 * extent)
     return (rng.random((count, 3)) - 0.5) * extent
+
+
+def ball_points(rng: np.random.Generator, centres: np.ndarray, radii: np.ndarray | float, count: int) -> np.ndarray:
+    """``count`` points uniform in balls of ``radii`` about ``centres`` (each broadcast over the points): a normal
+    triple's direction, then a uniform's cube root for the distance (engine.exact's, the same bits everywhere)."""
+    direction = rng.standard_normal((count, 3))
+    direction /= np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-12)
+    return centres + direction * (radii * exact.cbrt(rng.random(count)))[:, None]
 
 
 def advect_particles(cfg: ToonSmokeVolumeConfig, state: ToonSmokeState, dt: float, rng: np.random.Generator
