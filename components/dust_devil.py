@@ -14,7 +14,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import AfterValidator, Field, ValidationInfo, field_validator, model_validator
 
-from engine.config import Color3, ConfigModel, _as_tuple
+from engine.config import Color3, ConfigModel, CrossFieldError, _as_tuple
 from engine.registry import BuildContext
 
 __all__ = ["MAX_PBVR_POINTS", "MAX_POINT_FILL", "MAX_PREWARM_WORK", "DustDevilConfig", "DustDevilState",
@@ -138,11 +138,13 @@ class DustDevilConfig(ConfigModel):
         at their maxima would be 200 million points, minutes a frame on a software rasteriser."""
         points = self._pbvr_points()
         if self.pbvr and points > MAX_PBVR_POINTS:
-            raise ValueError(f"particle_count * sub_particles * repeats = {points} points a frame exceeds "
+            raise CrossFieldError(("particle_count", "sub_particles", "repeats"),
+                                 f"particle_count * sub_particles * repeats = {points} points a frame exceeds "
                              f"{MAX_PBVR_POINTS}; lower particle_count, sub_particles or repeats")
         fill = self._point_fill()
         if fill > MAX_POINT_FILL:
-            raise ValueError(f"{'particle_count * sub_particles * repeats' if self.pbvr else 'particle_count'} * "
+            raise CrossFieldError(("point_size", "particle_count", "sub_particles", "repeats"),
+                                 f"{'particle_count * sub_particles * repeats' if self.pbvr else 'particle_count'} * "
                              f"point_size² = {fill:.4g} pixels a frame exceeds {MAX_POINT_FILL:.4g}; lower "
                              "point_size or the point count")
         return self
@@ -155,7 +157,9 @@ class DustDevilConfig(ConfigModel):
         dt = float(dt) if dt else 1.0 / 60.0
         work = self._prewarm_work(dt)
         if work > MAX_PREWARM_WORK:
-            raise ValueError(f"particle_count * substeps * (prewarm_time / fixed_dt = {round(self.prewarm_time / dt)}"
+            raise CrossFieldError(("prewarm_time", "particle_count", "substeps"),
+                                 f"particle_count * substeps * (prewarm_time / fixed_dt = "
+                                 f"{round(self.prewarm_time / dt)}"
                              f" steps) = {work} particle steps before the first frame exceeds {MAX_PREWARM_WORK}; "
                              "lower prewarm_time, particle_count or substeps")
         return self

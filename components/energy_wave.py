@@ -20,7 +20,7 @@ from typing import Annotated
 import numpy as np
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 
-from engine.config import Color3, ConfigModel, Vec3
+from engine.config import Color3, ConfigModel, CrossFieldError, Vec3
 
 __all__ = [
     "BEAM",
@@ -235,7 +235,8 @@ class EnergyWaveEmitter(ConfigModel):
         (gigabytes of index buffer, a minute a frame)."""
         sprites = self._sprites()
         if sprites > MAX_SPRITES:
-            raise ValueError(f"max_particles * max(trail_textures, splash_samples) = {sprites} sprites exceeds "
+            raise CrossFieldError(("max_particles", "trail_textures", "splash_samples"),
+                                 f"max_particles * max(trail_textures, splash_samples) = {sprites} sprites exceeds "
                              f"{MAX_SPRITES}; lower max_particles, trail_textures or splash_samples")
         return self
 

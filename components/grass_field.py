@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 from pydantic import Field, field_validator, model_validator
 
-from engine.config import Color3, ConfigModel, Vec4
+from engine.config import Color3, ConfigModel, CrossFieldError, Vec4
 
 __all__ = ["GrassFieldConfig", "GrassFieldState", "build_grass_field", "MAX_PLANTS"]
 
@@ -157,22 +157,22 @@ class GrassFieldConfig(ConfigModel):
     @classmethod
     def _decreasing(cls, t: tuple[float, ...]) -> tuple[float, ...]:
         if not (t[0] > t[1] > t[2] > t[3] > 0.0):
-            raise ValueError(f"expected positive, strictly decreasing pseudo-pixel counts (P at 0⇄1 > 1⇄2 > 2⇄3 "
-                             f"> 3⇄4), got {list(t)}")
+            raise ValueError("expected positive, strictly decreasing pseudo-pixel counts (P at 0⇄1 > 1⇄2 > 2⇄3 "
+                             "> 3⇄4)")
         return t
 
     @field_validator("stem_length_fractions")
     @classmethod
     def _fractions(cls, f: tuple[float, ...]) -> tuple[float, ...]:
         if not all(0.0 < x <= 1.0 for x in f):
-            raise ValueError(f"expected four fractions in (0, 1], got {list(f)}")
+            raise ValueError("expected four fractions in (0, 1]")
         return f
 
     @field_validator("leaf_subdivisions")
     @classmethod
     def _subdivisions(cls, s: tuple[float, ...]) -> tuple[float, ...]:
         if not all(0.1 <= x <= 8.0 for x in s):
-            raise ValueError(f"expected four subdivision counts in [0.1, 8], got {list(s)}")
+            raise ValueError("expected four subdivision counts in [0.1, 8]")
         return s
 
     @field_validator("bare_areas")
@@ -195,7 +195,8 @@ class GrassFieldConfig(ConfigModel):
     def _plant_budget(self) -> GrassFieldConfig:
         plants = self._plants()
         if plants > MAX_PLANTS:
-            raise ValueError(f"grid_x * grid_z * plants_per_cell = {plants} plants exceeds {MAX_PLANTS}; "
+            raise CrossFieldError(("plants_per_cell", "grid_x", "grid_z"),
+                                 f"grid_x * grid_z * plants_per_cell = {plants} plants exceeds {MAX_PLANTS}; "
                              "lower grid_x, grid_z or plants_per_cell")
         return self
 
@@ -212,7 +213,9 @@ class GrassFieldConfig(ConfigModel):
         plant every frame."""
         estimate = self.level0_triangles()
         if estimate > MAX_PLANT_DETAIL:
-            raise ValueError(f"(branch_count + jitter) * (branch_segments + jitter) * (stem_sides + 2 * "
+            raise CrossFieldError(("branch_count", "branch_count_jitter", "branch_segments", "branch_segments_jitter",
+                                  "stem_sides", "leaf_subdivisions"),
+                                 f"(branch_count + jitter) * (branch_segments + jitter) * (stem_sides + 2 * "
                              f"leaf_subdivisions[0]) = {estimate} exceeds {MAX_PLANT_DETAIL} (about the triangles "
                              "of one level-0 plant); lower branch_count, branch_segments, stem_sides or "
                              "leaf_subdivisions")
@@ -226,7 +229,10 @@ class GrassFieldConfig(ConfigModel):
         segments = self.branch_segments + self.branch_segments_jitter
         longest = self.base_length * (1.0 + self.base_length_jitter) * segments * max(1.0, self.branch_length_ratio)
         if longest / spacing > MAX_DOTS_PER_LINE:
-            raise ValueError(f"level-3 dots every dot_spacing_pixels · length_of_interest / level_thresholds[2] = "
+            raise CrossFieldError(("dot_spacing_pixels", "length_of_interest", "level_thresholds", "base_length",
+                                  "base_length_jitter", "branch_segments", "branch_segments_jitter",
+                                  "branch_length_ratio"),
+                                 f"level-3 dots every dot_spacing_pixels · length_of_interest / level_thresholds[2] = "
                              f"{spacing:.3g} world units along stems up to {longest:.3g} long make "
                              f"{longest / spacing:.0f} dots per stem, more than {MAX_DOTS_PER_LINE}; raise "
                              "length_of_interest or dot_spacing_pixels, or lower level_thresholds[2]")

@@ -18,7 +18,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import AfterValidator, Field, model_validator
 
-from engine.config import Color3, ConfigModel, Vec3
+from engine.config import Color3, ConfigModel, CrossFieldError, Vec3
 
 __all__ = [
     "SmokeSourceConfig",
@@ -184,51 +184,63 @@ class ToonSmokeVolumeConfig(ConfigModel):
         sim, disp = self.simulation_resolution, self.display_resolution
         factors = [d / s for d, s in zip(disp, sim)]
         if any(f != int(f) for f in factors) or len(set(factors)) != 1 or not 1 <= factors[0] <= 4:
-            raise ValueError(f"display_resolution {list(disp)} must be simulation_resolution {list(sim)} times one "
+            raise CrossFieldError(("display_resolution", "simulation_resolution"),
+                                 f"display_resolution {list(disp)} must be simulation_resolution {list(sim)} times one "
                              f"integer factor 1..4 on every axis (e.g. {[2 * s for s in sim]})")
         cells = [e / n for e, n in zip(self.extent, sim)]
         if min(self.extent) <= 0.0 or max(cells) - min(cells) > 1e-6 * max(cells):
             cube = cells[0]
-            raise ValueError(f"extent {list(self.extent)} / simulation_resolution {list(sim)} gives cells of "
+            raise CrossFieldError(("extent", "simulation_resolution"),
+                                 f"extent {list(self.extent)} / simulation_resolution {list(sim)} gives cells of "
                              f"{[round(c, 6) for c in cells]} m: cells must be cubic (e.g. extent "
                              f"{[round(cube * n, 6) for n in sim]})")
         if len(self.ramp_positions) != len(self.ramp_colors):
-            raise ValueError(f"ramp_positions has {len(self.ramp_positions)} entries but ramp_colors has "
+            raise CrossFieldError(("ramp_positions", "ramp_colors"),
+                                 f"ramp_positions has {len(self.ramp_positions)} entries but ramp_colors has "
                              f"{len(self.ramp_colors)}: give one start position per colour")
         if self.ramp_positions[0] != 0.0 or any(b <= a for a, b in zip(self.ramp_positions, self.ramp_positions[1:])):
-            raise ValueError(f"ramp_positions {list(self.ramp_positions)} must start at 0 and increase strictly")
+            raise CrossFieldError("ramp_positions",
+                                 f"ramp_positions {list(self.ramp_positions)} must start at 0 and increase strictly")
         coarsest = coarsest_shape(sim)
         if math.prod(coarsest) > MAX_COARSEST_CELLS:
-            raise ValueError(f"simulation_resolution {list(sim)} halves only down to {list(coarsest)} = "
+            raise CrossFieldError("simulation_resolution",
+                                 f"simulation_resolution {list(sim)} halves only down to {list(coarsest)} = "
                              f"{math.prod(coarsest)} cells for the pressure solver's coarsest level (every side must "
                              f"stay even and at least 4), more than {MAX_COARSEST_CELLS}: keep the sides within a "
                              f"factor of 8 of each other (e.g. {[max(n, max(sim) // 8) for n in sim]})")
         if self.iso_density >= self.density_limit:
-            raise ValueError(f"iso_density {self.iso_density:g} must be below density_limit {self.density_limit:g}: "
+            raise CrossFieldError(("iso_density", "density_limit"),
+                                 f"iso_density {self.iso_density:g} must be below density_limit "
+                                 f"{self.density_limit:g}: "
                              "the display density never exceeds the limit, so no surface would be drawn")
         if self.particle_density_threshold >= self.density_limit:
-            raise ValueError(f"particle_density_threshold {self.particle_density_threshold:g} must be below "
+            raise CrossFieldError(("particle_density_threshold", "density_limit"),
+                                 f"particle_density_threshold {self.particle_density_threshold:g} must be below "
                              f"density_limit {self.density_limit:g}: the density never exceeds the limit, so no "
                              "particle would add a blob")
         work, display_cells = self._solver_work(), math.prod(disp)
         if work > MAX_SOLVER_WORK:
-            raise ValueError(f"simulation_resolution {list(sim)} × (diffusion_iterations + pressure_iterations) = "
+            raise CrossFieldError(("simulation_resolution", "diffusion_iterations", "pressure_iterations"),
+                                 f"simulation_resolution {list(sim)} × (diffusion_iterations + pressure_iterations) = "
                              f"{work} cell sweeps a tick exceeds {MAX_SOLVER_WORK}; lower the resolution or the "
                              "iterations")
         if display_cells > MAX_DISPLAY_CELLS:
-            raise ValueError(f"display_resolution {list(disp)} has {display_cells} cells, more than "
+            raise CrossFieldError("display_resolution",
+                                 f"display_resolution {list(disp)} has {display_cells} cells, more than "
                              f"{MAX_DISPLAY_CELLS} (128 × 128 × 256); lower it")
         h_display = cells[0] / factors[0]
         longest = self.blob_radius_max * self.blob_stretch_max / h_display
         if longest > MAX_BLOB_CELLS:
-            raise ValueError(f"blob_radius_max × blob_stretch_max = {self.blob_radius_max * self.blob_stretch_max:g} m "
+            raise CrossFieldError(("blob_radius_max", "blob_stretch_max", "display_resolution", "extent"),
+                                 f"blob_radius_max × blob_stretch_max = "
+                                 f"{self.blob_radius_max * self.blob_stretch_max:g} m "
                              f"is {longest:.1f} display cells; keep it ≤ {MAX_BLOB_CELLS:g} cells "
                              f"({MAX_BLOB_CELLS * h_display:g} m)")
         names = [s.name for s in self.sources]
         if len(set(names)) != len(names):
-            raise ValueError(f"source names must be unique, got {names}")
+            raise CrossFieldError("sources", f"source names must be unique, got {names}")
         if len(set(self.open_sides)) != len(self.open_sides):
-            raise ValueError(f"open_sides lists a side twice: {list(self.open_sides)}")
+            raise CrossFieldError("open_sides", f"open_sides lists a side twice: {list(self.open_sides)}")
         return self
 
     # -- derived sizes

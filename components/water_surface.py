@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 from pydantic import AfterValidator, Field, ValidationInfo, model_validator
 
 from engine.collider import Collider
-from engine.config import Color3, ConfigModel, Vec2, Vec3
+from engine.config import Color3, ConfigModel, CrossFieldError, Vec2, Vec3
 from engine.heightfield import HeightField
 from engine.registry import BuildContext
 
@@ -54,7 +54,8 @@ Resolution = Annotated[list[GridCount], Field(min_length=2, max_length=2), After
 
 
 def check_stability(wave_speed: float, spacing: float, dt: float, where: str = "") -> None:
-    """Raise ``ValueError`` if c·Δt/h exceeds the 2D limit 1/√2 of the explicit scheme (section 2.3.2).
+    """Raise ``ValueError`` (a :class:`CrossFieldError` on wave_speed and spacing) if c·Δt/h exceeds the 2D
+    limit 1/√2 of the explicit scheme (section 2.3.2).
 
     eq. 2.8 is stable for k = c²Δt²/h² ≤ 1/2 on the regular grid (each vertex has 4 neighbours: the update's
     coefficient 2 − 4k must stay ≥ 0).
@@ -63,7 +64,8 @@ def check_stability(wave_speed: float, spacing: float, dt: float, where: str = "
     if courant <= STABILITY_LIMIT * (1.0 + 1e-12):
         return
     prefix = f"{where}: " if where else ""
-    raise ValueError(
+    raise CrossFieldError(
+        ("wave_speed", "spacing"),
         f"{prefix}wave_speed c = {wave_speed:g} m/s with spacing h = {spacing:g} m and fixed_dt Δt = {dt:g} s gives "
         f"c·Δt/h = {courant:.4f}, above the 2D stability limit 1/√2 ≈ {STABILITY_LIMIT:.4f} of the explicit "
         f"height-field scheme; lower 'wave_speed' to ≤ {STABILITY_LIMIT * spacing / dt:.4g} m/s, raise 'spacing' "
@@ -124,21 +126,24 @@ class WaterSurface(ConfigModel):
     def _grid(self, info: ValidationInfo) -> WaterSurface:
         nx, nz = self.resolution
         if nx * nz > MAX_GRID_POINTS:
-            raise ValueError(f"resolution {nx} × {nz} has {nx * nz} vertices, more than the {MAX_GRID_POINTS} allowed")
+            raise CrossFieldError("resolution", f"resolution {nx} × {nz} has {nx * nz} vertices, more than the "
+                                                f"{MAX_GRID_POINTS} allowed")
         if self.extent is not None:
             ex, ez = self.extent
             if ex <= 0.0 or ez <= 0.0:
-                raise ValueError(f"extent must be positive in metres, got {list(self.extent)}")
+                raise CrossFieldError("extent", f"extent must be positive in metres, got {list(self.extent)}")
             hx, hz = ex / (nx - 1), ez / (nz - 1)
             if abs(hx - hz) > 1e-9 * max(hx, hz):
-                raise ValueError(f"extent {list(self.extent)} over resolution {[nx, nz]} gives cells of "
+                raise CrossFieldError(("extent", "resolution"),
+                                     f"extent {list(self.extent)} over resolution {[nx, nz]} gives cells of "
                                  f"{hx:g} × {hz:g} m; the cells must be square (the same spacing h along x and z)")
             if "spacing" in self.model_fields_set and abs(self.spacing - hx) > 1e-9 * hx:
-                raise ValueError(f"spacing {self.spacing:g} disagrees with extent {list(self.extent)} over "
+                raise CrossFieldError(("spacing", "extent"),
+                                     f"spacing {self.spacing:g} disagrees with extent {list(self.extent)} over "
                                  f"resolution {[nx, nz]} (which gives h = {hx:g}); give only one of them")
             object.__setattr__(self, "spacing", hx)
         if self.spacing > 100.0:
-            raise ValueError(f"spacing h = {self.spacing:g} m is above 100 m")
+            raise CrossFieldError(("extent", "resolution"), f"spacing h = {self.spacing:g} m is above 100 m")
         # With the scene's fixed step (validation context from the scene loader) the check is exact; on its
         # own (a preset validated alone) only the static part: unstable at every fixed step the engine accepts.
         scene_dt = (info.context or {}).get("fixed_dt") if info is not None else None
@@ -249,12 +254,14 @@ class RigidBody(ConfigModel):
     @model_validator(mode="after")
     def _sizes(self) -> RigidBody:
         if self.shape == "box" and (min(self.half_extents) < 1e-3 or max(self.half_extents) > 10000.0):
-            raise ValueError(f"half_extents must be in [0.001, 10000] for a box, got {list(self.half_extents)}")
+            raise CrossFieldError(("half_extents", "shape"),
+                                 f"half_extents must be in [0.001, 10000] for a box, got {list(self.half_extents)}")
         for key, limit_key in (("velocity", "max_speed"), ("angular_velocity", "max_angular_speed")):
             value, limit = getattr(self, key), getattr(self, limit_key)
             length = math.sqrt(sum(x * x for x in value))
             if length > limit:
-                raise ValueError(f"{key} {list(value)} has length {length:g}, above {limit_key} = {limit:g}; "
+                raise CrossFieldError((key, limit_key), f"{key} {list(value)} has length {length:g}, above "
+                                                        f"{limit_key} = {limit:g}; "
                                  f"lower it or raise {limit_key}")
         return self
 

@@ -64,6 +64,22 @@ class Problem:
         return text
 
 
+class CrossFieldError(ValueError):
+    """A model validator's complaint about keys that are each valid alone but not together.
+
+    Raise it from a ``model_validator`` instead of a bare ``ValueError``: the problem is reported at the first of
+    ``keys`` that the file sets (its line, or the preset's that set it), and it is still reported when other
+    keys of the same file have errors of their own, as long as none of ``keys`` is among them
+    (:func:`model_problems`), so a modder sees every problem in one pass.
+    """
+
+    def __init__(self, keys: str | Sequence[str], message: str) -> None:
+        self.keys = (keys,) if isinstance(keys, str) else tuple(keys)
+        if not self.keys:
+            raise TypeError("CrossFieldError needs at least one key")
+        super().__init__(message)
+
+
 class ConfigError(Exception):
     """All problems found while loading one or more config files."""
 
@@ -125,8 +141,9 @@ def _split_dotted(key: str) -> list[str]:
     return [p.strip().strip("\"'") for p in key.split(".")]
 
 
-def locate_line(text: str, key_path: Sequence[Any]) -> int | None:
-    """Best-effort 1-based line of ``key_path`` in TOML ``text``; falls back to the nearest parent."""
+def locate_line(text: str, key_path: Sequence[Any], exact: bool = False) -> int | None:
+    """Best-effort 1-based line of ``key_path`` in TOML ``text``; falls back to the nearest parent (``exact``:
+    ``None`` when the key itself is not written there)."""
     target = format_key(key_path)
     found: dict[str, int] = {}
     table: list[Any] = []
@@ -146,6 +163,8 @@ def locate_line(text: str, key_path: Sequence[Any]) -> int | None:
         assign = _ASSIGN.match(line)
         if assign:
             found.setdefault(format_key(table + _split_dotted(assign.group(1))), lineno)
+    if exact:
+        return found.get(target)
     parts = list(key_path)
     while parts:
         key = format_key(parts)
@@ -168,12 +187,50 @@ def _resolve_arrays(parts: list[Any], counts: dict[str, int]) -> list[Any]:
 
 
 # ---------------------------------------------------------------------- validation
+def _cross_field_keys(err: dict) -> tuple[str, ...] | None:
+    error = (err.get("ctx") or {}).get("error")
+    return error.keys if isinstance(error, CrossFieldError) else None
+
+
+def _hidden_cross_field_errors(errors: list[dict], model: type[BaseModel], data: Any,
+                               context: dict | None) -> list[dict]:
+    """The model's own cross-field errors that its field errors kept pydantic from checking.
+
+    pydantic runs a model's ``mode="after"`` validators only once every field is valid. Validated again without
+    the keys that had errors (their defaults stand in), the model's :class:`CrossFieldError` s whose keys are all
+    outside those are real problems of the file too.
+    """
+    if not isinstance(data, dict) or not errors or any(not err["loc"] for err in errors):
+        return []
+    bad = {err["loc"][0] for err in errors}
+    try:
+        model.model_validate({k: v for k, v in data.items() if k not in bad}, context=context)
+    except ValidationError as exc:
+        return [err for err in exc.errors(include_url=False)
+                if not err["loc"] and (keys := _cross_field_keys(err)) and not bad.intersection(keys)]
+    except Exception:  # noqa: BLE001 - a validator tripping over a stand-in default reports nothing extra
+        return []
+    return []
+
+
 def model_problems(exc: ValidationError, model: type[BaseModel], file: str, prefix: Sequence[Any],
-                   text: str | None = None, text_prefix: Sequence[Any] | None = None) -> list[Problem]:
-    """Translate a pydantic error into problems whose key paths are TOML key paths."""
+                   text: str | None = None, text_prefix: Sequence[Any] | None = None, data: Any = None,
+                   context: dict | None = None) -> list[Problem]:
+    """Translate a pydantic error into problems whose key paths are TOML key paths.
+
+    With the ``data`` (and ``context``) that failed, the model's cross-field problems hidden behind its field
+    errors are reported too (:func:`_hidden_cross_field_errors`).
+    """
     problems = []
-    for err in exc.errors(include_url=False):
+    errors = exc.errors(include_url=False)
+    errors += _hidden_cross_field_errors(errors, model, data, context)
+    text_base = list(text_prefix if text_prefix is not None else prefix)
+    for err in errors:
         loc = [p for p in err["loc"] if not (isinstance(p, str) and p.startswith("function-"))]
+        keys = _cross_field_keys(err)
+        if keys:  # reported at the first of its keys the file writes (else the first)
+            written = [k for k in keys if text and locate_line(text, text_base + loc + [k], exact=True)]
+            loc = loc + [(written or keys)[0]]
         suggestion = None
         message = err["msg"]
         if err["type"] == "extra_forbidden":
@@ -191,8 +248,8 @@ def model_problems(exc: ValidationError, model: type[BaseModel], file: str, pref
             message = message.replace("Input should be", "expected")
             if err["type"] in ("value_error", "assertion_error"):  # a validator's own words, without pydantic's prefix
                 message = re.sub(r"^(Value error|Assertion failed), ", "", message)
-        line = locate_line(text, list(text_prefix if text_prefix is not None else prefix) + loc) if text else None
-        value = err.get("input") if err["type"] not in ("missing",) else None
+        line = locate_line(text, text_base + loc) if text else None
+        value = err.get("input") if err["type"] not in ("missing",) and not keys else None
         if err["type"] == "extra_forbidden" or isinstance(value, dict):
             value = None if isinstance(value, dict) else value
         problems.append(Problem(file, format_key(list(prefix) + loc), message, value, suggestion, line))
@@ -233,7 +290,7 @@ def validate(model: type[BaseModel], data: Any, file: str, prefix: Sequence[Any]
     try:
         return model.model_validate(data, context=context)
     except ValidationError as exc:
-        raise ConfigError(model_problems(exc, model, file, prefix, text)) from None
+        raise ConfigError(model_problems(exc, model, file, prefix, text, data=data, context=context)) from None
 
 
 # --------------------------------------------------------------------------- paths

@@ -265,7 +265,7 @@ def load_component(registry: Registry, cname: str, values: dict, file: Path, tex
         return spec.model.model_validate(merged, context=context)
     except ValidationError as exc:
         problems = []
-        for p in model_problems(exc, spec.model, str(file), key, text):
+        for p in model_problems(exc, spec.model, str(file), key, text, data=merged, context=context):
             top = p.key[len(format_key(key)) + 1:].split(".")[0].split("[")[0]
             if preset_file is not None and top in preset and top not in values:
                 sub = p.key[len(format_key(key)) + 1:]

@@ -16,7 +16,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, model_validator
 
-from engine.config import Color3, ConfigModel, Vec3, Vec4
+from engine.config import Color3, ConfigModel, CrossFieldError, Vec3, Vec4
 from engine.exact import length, matvec, vecmat
 from engine.input import InputState
 from engine.spatial import Transform, cross, quat_from_euler, quat_rotate
@@ -53,11 +53,12 @@ class CameraConfig(ConfigModel):
     @model_validator(mode="after")
     def _consistent(self) -> CameraConfig:
         if self.near >= self.far:
-            raise ValueError(f"near ({self.near:g}) must be less than far ({self.far:g})")
+            raise CrossFieldError(("near", "far"), f"near ({self.near:g}) must be less than far ({self.far:g})")
         x, y, w, h = self.viewport
         if not (0.0 <= x < 1.0 and 0.0 <= y < 1.0 and 0.0 < w <= 1.0 and 0.0 < h <= 1.0
                 and x + w <= 1.0 + 1e-6 and y + h <= 1.0 + 1e-6):
-            raise ValueError(f"viewport {list(self.viewport)} must lie inside the window: x, y in [0, 1), "
+            raise CrossFieldError("viewport", f"viewport {list(self.viewport)} must lie inside the window: "
+                                              "x, y in [0, 1), "
                              "width, height in (0, 1], x + width <= 1 and y + height <= 1")
         return self
 

@@ -23,17 +23,18 @@ CASES = [
     ("EnergyWaveEmitter", "splash_samples = 1000", "splash_samples", 1000, "less than or equal to 64"),
     ("EnergyWaveEmitter", "beam_speed = nan", "beam_speed", math.nan, "finite number"),
     ("GrassField", "grid_x = 100000", "grid_x", 100000, "less than or equal to 256"),
-    ("GrassField", "grid_x = 256\ngrid_z = 256\nplants_per_cell = 256", "", None, "exceeds 1048576"),
-    ("GrassField", "length_of_interest = 0.000001", "", None, "dots per stem"),
+    ("GrassField", "grid_x = 256\ngrid_z = 256\nplants_per_cell = 256", "plants_per_cell", None, "exceeds 1048576"),
+    ("GrassField", "length_of_interest = 0.000001", "length_of_interest", None, "dots per stem"),
     ("ToonSmokeVolume", "simulation_resolution = [12, 16, 16]", "simulation_resolution[0]", 12, "multiple of 8"),
     ("ToonSmokeVolume", "particle_count = 1000000", "particle_count", 1000000, "less than or equal to 100000"),
-    ("ToonSmokeVolume", "display_resolution = [40, 40, 40]", "", None, "integer factor 1..4"),
+    ("ToonSmokeVolume", "display_resolution = [40, 40, 40]", "display_resolution", None, "integer factor 1..4"),
     ("WaterSurface", "resolution = [4096, 4]", "resolution[0]", 4096, "less than or equal to 2048"),
     ("WaterSurface", "damping = 2.0", "damping", 2.0, "less than or equal to 1"),
-    ("WaterSurface", "wave_speed = 100.0", "", None, "stability limit"),
+    ("WaterSurface", "wave_speed = 100.0", "wave_speed", None, "stability limit"),
     ("RigidBody", "mass = 0.0", "mass", 0.0, "greater than 0"),
     ("RigidBody", "velocity = [1e9, 0.0, 0.0]", "velocity[0]", 1e9, "less than or equal to 1000000"),
-    ("RigidBody", 'shape = "box"\nhalf_extents = [0.0, 1.0, 1.0]', "", None, "half_extents must be in [0.001, 10000]"),
+    ("RigidBody", 'shape = "box"\nhalf_extents = [0.0, 1.0, 1.0]', "half_extents", None,
+     "half_extents must be in [0.001, 10000]"),
     ("DustDevil", "particle_count = 10000000", "particle_count", 10000000, "less than or equal to 200000"),
     ("DustDevil", "grid_resolution = [2, 32, 32]", "grid_resolution[0]", 2, "greater than or equal to 4"),
     ("Terrain", "size_exponent = 40", "size_exponent", 40, "less than or equal to 10"),
@@ -47,21 +48,22 @@ CASES = [
     ("Collider", "half_extents = [-1.0, 1.0, 1.0]", "half_extents[0]", -1.0, "greater than or equal to 0"),
     ("Collider", "normal = [0.0, 0.0, 0.0]", "normal", [0.0, 0.0, 0.0], "non-zero direction"),
     # joint budgets and sizes that passed validation and then crashed, hung or took gigabytes (a fuzzing review)
-    ("EnergyWaveEmitter", "max_particles = 1000000\ntrail_textures = 64", "", None,
+    ("EnergyWaveEmitter", "max_particles = 1000000\ntrail_textures = 64", "max_particles", None,
      "max_particles * max(trail_textures, splash_samples) = 64000000 sprites exceeds 2000000"),
-    ("GrassField", "branch_count = 32\nbranch_segments = 24\nstem_sides = 32", "", None,
+    ("GrassField", "branch_count = 32\nbranch_segments = 24\nstem_sides = 32", "branch_count", None,
      "exceeds 20000 (about the triangles"),
     ("ToonSmokeVolume", "simulation_resolution = [64, 64, 64]\ndisplay_resolution = [256, 256, 256]\n"
-                        "extent = [4.0, 4.0, 4.0]", "", None, "more than 4194304"),
+                        "extent = [4.0, 4.0, 4.0]", "display_resolution", None, "more than 4194304"),
     ("ToonSmokeVolume", "simulation_resolution = [128, 128, 128]\ndisplay_resolution = [128, 128, 128]\n"
-                        "pressure_iterations = 500", "", None, "cell sweeps a tick exceeds 33554432"),
+                        "pressure_iterations = 500", "simulation_resolution", None,
+     "cell sweeps a tick exceeds 33554432"),
     ("ToonSmokeVolume", 'sources = [{ name = "s", radius = 1e-200 }]', "sources[0].radius", 1e-200,
      "greater than or equal to 0.01"),
     ("RigidBody", 'shape = "sphere"\nradius = 1e-300', "radius", 1e-300, "greater than or equal to 0.001"),
-    ("RigidBody", 'shape = "box"\nhalf_extents = [1e-300, 1e-300, 1e-300]', "", None, "[0.001, 10000]"),
-    ("DustDevil", "particle_count = 200000\nsub_particles = 2\nrepeats = 20\npoint_size = 32.0", "", None,
+    ("RigidBody", 'shape = "box"\nhalf_extents = [1e-300, 1e-300, 1e-300]', "half_extents", None, "[0.001, 10000]"),
+    ("DustDevil", "particle_count = 200000\nsub_particles = 2\nrepeats = 20\npoint_size = 32.0", "point_size", None,
      "pixels a frame exceeds"),
-    ("DustDevil", "particle_count = 200000\nsubsteps = 8\nprewarm_time = 60.0", "", None,
+    ("DustDevil", "particle_count = 200000\nsubsteps = 8\nprewarm_time = 60.0", "prewarm_time", None,
      "particle steps before the first frame exceeds 100000000"),
 ]
 
@@ -94,8 +96,12 @@ def test_out_of_range_value_names_file_key_value_and_expectation(tmp_path, compo
     assert problem.line is not None and problem.line >= 3
     # a bound must be the bound: "less than or equal to 64" must not pass as the start of "... to 640"
     assert re.search(re.escape(expected) + r"(?![\d.]*\d)", problem.message), problem.message
-    if key:
+    if value is not None:
         assert same(problem.value, value)
+    else:  # a check across keys: reported at the first key it names that the table writes, on its line
+        assert problem.value is None
+        written = [x.split(" ")[0] for x in lines.split("\n")]
+        assert problem.line == 4 + written.index(key), problem
 
 
 def test_validate_reports_every_case_at_once_without_traceback(tmp_path, capsys):
@@ -151,3 +157,38 @@ def test_no_float_field_accepts_nan_or_inf(name):
         for bad in (math.nan, math.inf):
             with pytest.raises(ValidationError, match="finite number"):
                 model.model_validate({field: bad})
+
+
+def test_cross_key_problem_is_reported_beside_field_errors(tmp_path):
+    """pydantic checks a model's keys together only once each key is valid; a modder still sees both kinds of
+    problem in one pass, each at its own key and line."""
+    path = write_scene(tmp_path, [("WaterSurface", "damping = 2.0\nwave_speed = 300.0")])
+    with pytest.raises(ConfigError) as err:
+        plan_scene(path, REGISTRY)
+    table = "entities[0].components.WaterSurface"
+    found = {(p.key, p.line) for p in err.value.problems}
+    assert found == {(f"{table}.damping", 4), (f"{table}.wave_speed", 5)}, err.value
+    assert "stability limit" in str(err.value)
+
+
+def test_cross_key_problem_hidden_when_one_of_its_keys_is_invalid(tmp_path):
+    """A joint check whose own keys have errors is not run on stand-in defaults: only the field error shows."""
+    path = write_scene(tmp_path, [("ToonSmokeVolume", "simulation_resolution = [12, 16, 16]\n"
+                                                      "display_resolution = [40, 40, 40]\nparticle_count = 1000000")])
+    with pytest.raises(ConfigError) as err:
+        plan_scene(path, REGISTRY)
+    keys = sorted(p.key.rsplit(".", 1)[-1] for p in err.value.problems)
+    assert keys == ["particle_count", "simulation_resolution[0]"], err.value
+
+
+def test_cross_key_problem_of_a_preset_names_the_preset(tmp_path):
+    """A joint check failing on a key the preset sets (and the scene does not override) points at the preset."""
+    path = write_scene(tmp_path, [("WaterSurface", 'preset = "bad"\ndamping = 2.0')])
+    preset = tmp_path / "configs" / "effects" / "water_surface" / "bad.toml"
+    preset.parent.mkdir(parents=True)
+    preset.write_text("resolution = [16, 16]\nspacing = 0.1\nwave_speed = 300.0\n")
+    with pytest.raises(ConfigError) as err:
+        plan_scene(path, REGISTRY)
+    where = {(p.file, p.key, p.line) for p in err.value.problems}
+    assert where == {(str(path), "entities[0].components.WaterSurface.damping", 5),
+                     (str(preset), "wave_speed", 3)}, err.value

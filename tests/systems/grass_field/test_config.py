@@ -64,6 +64,7 @@ def test_bad_values_name_the_key(tmp_path, registry, body, key, words):
     assert len(problems) == 1
     assert problems[0].key.endswith(key), problems[0]
     assert words in str(problems[0])
+    assert str(problems[0]).count("got ") <= 1, problems[0]  # the value once, not again after the message
 
 
 def test_unknown_key_suggests_the_near_miss(tmp_path, registry):
