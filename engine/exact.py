@@ -17,17 +17,22 @@ hits, what a pointer picks). Rendering, where a float's last bit never matters, 
 The arrays are small (3- and 4-vectors, 3 × 3 and 4 × 4 matrices, stacks of them); each function costs a few
 numpy calls per summed index.
 
-The elementary functions here (:func:`exp`, :func:`cbrt`, :func:`atan`, :func:`atan2`, :func:`asin`) exist for
-the same reason. numpy computes ``np.exp``, ``np.log``, ``np.power``, ``np.cbrt``, ``np.arctan2``, ``np.arccos``
-and others with SIMD code chosen by the CPU: on a CPU with AVX-512 (numpy's ``AVX512_SKX`` dispatch) float64
-``exp``, ``cbrt`` and ``arctan2`` give other last bits than on an AVX2 or older one, and the demo's state hash
-after its autoplay differed (``NPY_DISABLE_CPU_FEATURES`` shows it on one machine). Python's ``math`` and numba's
-calls go to the C library, which differs between systems. These are written with ``+ - * /`` (no fused
-multiply-adds: the kernels compile without fast-math), ``frexp``/``ldexp`` and comparisons only, so they give the
-same bits everywhere: fdlibm's algorithms (Sun's freely distributable libm, the reference of Java's
-``StrictMath``), within one unit in the last place of the true value. Each is a compiled scalar function that
-other kernels call, and takes a number or an array. ``np.sin``, ``np.cos``, ``np.sqrt``, ``np.tanh`` and
-``np.hypot`` gave the same bits with and without AVX-512 and are used directly.
+The elementary functions here (:func:`exp`, :func:`cbrt`, :func:`atan`, :func:`atan2`, :func:`asin`, :func:`sin`,
+:func:`cos`, :func:`tan`) exist for the same reason. numpy computes ``np.exp``, ``np.log``, ``np.power``,
+``np.cbrt``, ``np.arctan2``, ``np.arccos`` and others with SIMD code chosen by the CPU: on a CPU with AVX-512
+(numpy's ``AVX512_SKX`` dispatch) float64 ``exp``, ``cbrt`` and ``arctan2`` give other last bits than on an AVX2
+or older one, and the demo's state hash after its autoplay differed (``NPY_DISABLE_CPU_FEATURES`` shows it on one
+machine). Python's ``math`` and numba's calls go to the C library, which differs between systems. These are
+written with ``+ - * /`` (no fused multiply-adds: the kernels compile without fast-math), ``frexp``/``ldexp``,
+integers and comparisons only, so they give the same bits everywhere: fdlibm's algorithms (Sun's freely
+distributable libm, the reference of Java's ``StrictMath``), within one unit in the last place of the true value.
+Each is a compiled scalar function that other kernels call, and takes a number or an array. ``np.sqrt``,
+``np.tanh`` and ``np.hypot`` gave the same bits with and without AVX-512 and are used directly. ``np.sin`` and
+``np.cos`` did too, but they call the C library's ``sin`` and ``cos``, and glibc's, macOS's and Windows' are
+different code whose last bits differ: :func:`sin`, :func:`cos` and :func:`tan` replace them wherever a result
+decides simulation state (on 3.8 million arguments of every magnitude they gave the bits of Java 17's
+``StrictMath``). They reduce every finite argument correctly, 1e22 and 1.7e308 included: by π/2 split in three
+33-bit parts below about 1.6 million, and with 1584 bits of 2/π above (Payne and Hanek's method).
 """
 
 from __future__ import annotations
@@ -39,7 +44,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from engine.jit import kernel
 
-__all__ = ["asin", "atan", "atan2", "cbrt", "dot", "exp", "inverse", "length", "matmul", "matvec", "vecmat"]
+__all__ = ["asin", "atan", "atan2", "cbrt", "cos", "dot", "exp", "inverse", "length", "matmul", "matvec", "sin",
+           "tan", "vecmat"]
 
 F64 = NDArray[np.float64]
 
@@ -130,6 +136,49 @@ _PI = 3.1415926535897931160e+00
 _PI_LO = 1.2246467991473531772e-16  # π − _PI
 _PI_2 = 1.5707963267948965580e+00
 _PI_4 = 7.8539816339744827900e-01
+
+# Constants of fdlibm 5.3's sine, cosine and tangent (k_sin.c, k_cos.c, k_tan.c, e_rem_pio2.c, k_rem_pio2.c), each
+# the double whose hex words the fdlibm source gives (beside each, high and low 32 bits).
+_S1, _S2, _S3 = (-1.66666666666666324348e-01, 8.33333333332248946124e-03,  # BFC55555 55555549, 3F811111 1110F8A6
+                 -1.98412698298579493134e-04)  # BF2A01A0 19C161D5
+_S4, _S5, _S6 = (2.75573137070700676789e-06, -2.50507602534068634195e-08,  # 3EC71DE3 57B1FE7D, BE5AE5E6 8A2B9CEB
+                 1.58969099521155010221e-10)  # 3DE5D93A 5ACFD57C
+_C1, _C2, _C3 = (4.16666666666666019037e-02, -1.38888888888741095749e-03,  # 3FA55555 5555554C, BF56C16C 16C15177
+                 2.48015872894767294178e-05)  # 3EFA01A0 19CB1590
+_C4, _C5, _C6 = (-2.75573143513906633035e-07, 2.08757232129817482790e-09,  # BE927E4F 809C52AD, 3E21EE9E BDB4B1C4
+                 -1.13596475577881948265e-11)  # BDA8FAE9 BE8838D4
+_T = (3.33333333333334091986e-01, 1.33333333333201242699e-01, 5.39682539762260521377e-02,  # tan x ≈ x + T0 x³
+      2.18694882948595424599e-02, 8.86323982359930005737e-03, 3.59207910759131235356e-03,  # + ... + T12 x^27
+      1.45620945432529025516e-03, 5.88041240820264096874e-04, 2.46463134818469906812e-04,  # on [0, 0.6744]
+      7.81794442939557092300e-05, 7.14072491382608190305e-05, -1.85586374855275456654e-05,
+      2.59073051863633712884e-05)
+_PI_4_LO = 3.06161699786838301793e-17  # π/4 − _PI_4: 3C81A626 33145C07
+_INV_PIO2 = 6.36619772367581382433e-01  # 2/π: 3FE45F30 6DC9C883
+_PIO2_1 = 1.57079632673412561417e+00  # π/2's first 33 bits: 3FF921FB 54400000
+_PIO2_1T = 6.07710050650619224932e-11  # π/2 − _PIO2_1: 3DD0B461 1A626331
+_PIO2_2 = 6.07710050630396597660e-11  # the next 33 bits: 3DD0B461 1A600000
+_PIO2_2T = 2.02226624879595063154e-21  # π/2 − (_PIO2_1 + _PIO2_2): 3BA3198A 2E037073
+_PIO2_3 = 2.02226624871116645580e-21  # the next 33 bits: 3BA3198A 2E000000
+_PIO2_3T = 8.47842766036889956997e-32  # π/2 − (_PIO2_1 + _PIO2_2 + _PIO2_3): 397B839A 252049C1
+_NPIO2_HW = np.array([  # high words of n·π/2, n = 1 ... 32: an x near one of them may cancel
+    0x3FF921FB, 0x400921FB, 0x4012D97C, 0x401921FB, 0x401F6A7A, 0x4022D97C, 0x4025FDBB, 0x402921FB, 0x402C463A,
+    0x402F6A7A, 0x4031475C, 0x4032D97C, 0x40346B9C, 0x4035FDBB, 0x40378FDB, 0x403921FB, 0x403AB41B, 0x403C463A,
+    0x403DD85A, 0x403F6A7A, 0x40407E4C, 0x4041475C, 0x4042106C, 0x4042D97C, 0x4043A28C, 0x40446B9C, 0x404534AC,
+    0x4045FDBB, 0x4046C6CB, 0x40478FDB, 0x404858EB, 0x404921FB], np.int64)
+_TWO_OVER_PI = np.array([  # 2/π's first 1584 bits after the binary point, 24 at a time (396 hex digits)
+    0xA2F983, 0x6E4E44, 0x1529FC, 0x2757D1, 0xF534DD, 0xC0DB62, 0x95993C, 0x439041, 0xFE5163, 0xABDEBB, 0xC561B7,
+    0x246E3A, 0x424DD2, 0xE00649, 0x2EEA09, 0xD1921C, 0xFE1DEB, 0x1CB129, 0xA73EE8, 0x8235F5, 0x2EBB44, 0x84E99C,
+    0x7026B4, 0x5F7E41, 0x3991D6, 0x398353, 0x39F49C, 0x845F8B, 0xBDF928, 0x3B1FF8, 0x97FFDE, 0x05980F, 0xEF2F11,
+    0x8B5A0A, 0x6D1F6D, 0x367ECF, 0x27CB09, 0xB74F46, 0x3F669E, 0x5FEA2D, 0x7527BA, 0xC7EBE5, 0xF17B3D, 0x0739F7,
+    0x8A5292, 0xEA6BFB, 0x5FB11F, 0x8D5D08, 0x560330, 0x46FC7B, 0x6BABF0, 0xCFBC20, 0x9AF436, 0x1DA9E3, 0x91615E,
+    0xE61B08, 0x659985, 0x5F14A0, 0x68408D, 0xFFD880, 0x4D7327, 0x310606, 0x1556CA, 0x73A8C9, 0x60E27B, 0xC08C6B],
+    np.int64)
+_PIO2_24 = np.array([  # π/2 cut in 24-bit parts (k_rem_pio2.c's PIo2)
+    1.57079625129699707031e+00, 7.54978941586159635335e-08, 5.39030252995776476554e-15, 3.28200341580791294123e-22,
+    1.27065575308067607349e-29, 1.22933308981111328932e-36, 2.73370053816464559624e-44, 2.16741683877804819444e-51])
+# The three tables are arrays: numba compiles a tuple indexed at run time to a switch, which took 10 ns a sine.
+_TWO24 = 1.67772160000000000000e+07  # 2^24
+_TWON24 = 5.96046447753906250000e-08  # 2^-24
 
 
 @kernel
@@ -263,6 +312,358 @@ def asin_scalar(x: float) -> float:
 
 
 @kernel
+def _high_word(a: float) -> int:
+    """The upper 32 bits of a finite a ≥ 0 as IEEE 754 stores it (fdlibm's ``__HI(x) & 0x7fffffff``): the biased
+    exponent above the fraction's leading 20 bits."""
+    if a < 2.2250738585072014e-308:  # 2^-1022: subnormal or 0, exponent field 0
+        return int(math.ldexp(a, 1074)) >> 32
+    m, e = math.frexp(a)
+    return ((e + 1022) << 20) + int(m * 2097152.0) - 1048576  # m·2^21 in [2^20, 2^21): 1 and 20 fraction bits
+
+
+@kernel
+def _clear_low_word(x: float) -> float:
+    """x with the low 32 bits of its encoding 0 (fdlibm's ``__LO(x) = 0``): a normal x cut toward 0 to 21 bits."""
+    if abs(x) < 2.2250738585072014e-308:  # subnormal or 0: multiples of 2^-1042 are kept
+        return math.copysign(math.ldexp(float(int(math.ldexp(x, 1042))), -1042), x)
+    m, e = math.frexp(x)
+    return math.ldexp(float(int(m * 2097152.0)), e - 21)
+
+
+@kernel
+def _kernel_sin(x: float, y: float, iy: int) -> float:
+    """sin(x + y) for |x| ≲ π/4 and y a correction below x's last bit, 0 when iy is 0 (fdlibm 5.3's k_sin.c): an
+    odd polynomial of degree 13, y entering as sin(x + y) ≈ sin x + (1 − x²/2)·y."""
+    if abs(x) < 7.450580596923828e-09:  # 2^-27 (high word 0x3e400000): sin x rounds to x
+        return x
+    z = x * x
+    v = z * x
+    r = _S2 + z * (_S3 + z * (_S4 + z * (_S5 + z * _S6)))
+    if iy == 0:
+        return x + v * (_S1 + z * r)
+    return x - ((z * (0.5 * y - v * r) - y) - v * _S1)
+
+
+@kernel
+def _kernel_cos(x: float, y: float) -> float:
+    """cos(x + y) for |x| ≲ π/4 (fdlibm 5.3's k_cos.c, as in Java's StrictMath, not FreeBSD msun's rewrite):
+    1 − x²/2 + an even polynomial of degree 14, y entering as −x·y. For |x| ≥ 0.3, qx ≈ |x|/4 (0.28125 above
+    0.78125) is taken from both parts first: 1 − qx and x²/2 − qx are then exact."""
+    a = abs(x)
+    if a < 7.450580596923828e-09:  # 2^-27 (high word 0x3e400000): cos x rounds to 1
+        return 1.0
+    z = x * x
+    r = z * (_C1 + z * (_C2 + z * (_C3 + z * (_C4 + z * (_C5 + z * _C6)))))
+    if a < 0.2999999523162842:  # high word below 0x3FD33333: |x| < 0.3
+        return 1.0 - (0.5 * z - (z * r - x * y))
+    if a >= 0.7812504768371582:  # high word above 0x3fe90000: |x| > 0.78125
+        qx = 0.28125
+    else:  # |x|/4 with the low word 0: |x|'s 21 leading bits, its multiples of 2^-22 below 1/2, of 2^-21 above
+        k = int(a * 4194304.0)  # 2^22
+        qx = float(k - (k & (k >> 21))) * 5.9604644775390625e-08  # 2^-24
+    hz = 0.5 * z - qx
+    return (1.0 - qx) - (hz - (z * r - x * y))
+
+
+@kernel
+def _kernel_tan(x: float, y: float, iy: int) -> float:
+    """tan(x + y) when iy is 1, −1/tan(x + y) when iy is −1, for |x| ≲ π/4 (fdlibm's k_tan.c as Sun corrected it
+    in 2004 for |x| near 0.6744, the version of FreeBSD msun and Java's StrictMath): an odd polynomial of degree
+    27 on [0, 0.6744], tan(π/4 − x) from it above; −1/tan with the quotient's leading 21 bits taken apart, so that
+    it stays within an ulp."""
+    a = abs(x)
+    if a < 3.725290298461914e-09:  # 2^-28 (high word 0x3e300000)
+        if a == 0.0 and iy == -1:
+            return math.inf  # 1/|x|
+        if iy == 1:
+            return x
+        w = x + y  # −1/(x + y) with care
+        z = _clear_low_word(w)
+        v = y - (z - x)
+        quo = -1.0 / w
+        t = _clear_low_word(quo)
+        s = 1.0 + t * z
+        return t + quo * (s + t * v)
+    big = a >= 0.6743354797363281  # high word 0x3FE59428: |x| ≥ 0.6744
+    sign = -1.0 if x < 0.0 else 1.0
+    if big:
+        if x < 0.0:
+            x = -x
+            y = -y
+        z = _PI_4 - x
+        w = _PI_4_LO - y
+        x = z + w
+        y = 0.0
+    z = x * x
+    w = z * z
+    # x^5·(T1 + x²·T2 + ...) as x^5·(T1 + x^4·T3 + ... + x^20·T11) + x^5·x²·(T2 + x^4·T4 + ... + x^20·T12)
+    r = _T[1] + w * (_T[3] + w * (_T[5] + w * (_T[7] + w * (_T[9] + w * _T[11]))))
+    v = z * (_T[2] + w * (_T[4] + w * (_T[6] + w * (_T[8] + w * (_T[10] + w * _T[12])))))
+    s = z * x
+    r = y + z * (s * (r + v) + y)
+    r += _T[0] * s
+    w = x + r
+    if big:
+        v = float(iy)
+        return sign * (v - 2.0 * (x - (w * w / (w + v) - r)))
+    if iy == 1:
+        return w
+    z = _clear_low_word(w)  # −1/(x + r) accurately (−1/w alone errs by up to 2 ulps)
+    v = r - (z - x)  # z + v = x + r
+    quo = -1.0 / w
+    t = _clear_low_word(quo)
+    s = 1.0 + t * z
+    return t + quo * (s + t * v)
+
+
+@kernel
+def _kernel_rem_pio2(x, e0: int, nx: int) -> tuple[int, float, float]:
+    """n mod 8 and y0 + y1 = X − n·π/2 (|y0 + y1| ≤ π/4) for X = Σ x[i]·2^(e0 − 24i), the x[i] integers below 2^24
+    (fdlibm 5.3's k_rem_pio2.c, precision 2 as e_rem_pio2.c calls it): Payne and Hanek's reduction. Of 2/π only the
+    24-bit parts that can change (X·2/π) mod 8 are multiplied, as integers in doubles (every product and sum is
+    exact), with more parts while the fraction's leading bits are all 0; the fraction times π/2 (in 24-bit parts)
+    then gives y0 + y1."""
+    jk = 4  # jk + 1 parts of 2/π at first (init_jk[2])
+    jp = jk  # jp + 1 parts of π/2
+    iq = np.zeros(20, np.int64)
+    f = np.zeros(20, np.float64)
+    q = np.zeros(20, np.float64)
+    fq = np.zeros(20, np.float64)
+    jx = nx - 1
+    jv = max((e0 - 3) // 24, 0)  # 2^e0·x[0]·(2/π's parts before jv) is a multiple of 8 (C's / rounds toward 0:
+    # the same once clamped at 0)
+    q0 = e0 - 24 * (jv + 1)  # the exponent of q[0]; q[i]'s is q0 − 24i
+    j = jv - jx  # f[0] ... f[jx + jk], f[jx + jk] = 2/π's part jv + jk
+    for i in range(jx + jk + 1):
+        f[i] = 0.0 if j < 0 else float(_TWO_OVER_PI[j])
+        j += 1
+    for i in range(jk + 1):  # q[0] ... q[jk]
+        fw = 0.0
+        for j in range(jx + 1):
+            fw += x[j] * f[jx + i - j]
+        q[i] = fw
+    jz = jk
+    while True:
+        z = q[jz]  # q[] distilled into 24-bit integers iq[], reversed
+        i = 0
+        for j in range(jz, 0, -1):
+            fw = float(int(_TWON24 * z))
+            iq[i] = int(z - _TWO24 * fw)
+            z = q[j - 1] + fw
+            i += 1
+        z = math.ldexp(z, q0)  # n
+        z -= 8.0 * math.floor(z * 0.125)  # integers ≥ 8 off
+        n = int(z)
+        z -= float(n)
+        ih = 0
+        if q0 > 0:  # iq[jz − 1] holds n's last bits
+            i = iq[jz - 1] >> (24 - q0)
+            n += i
+            iq[jz - 1] -= i << (24 - q0)
+            ih = iq[jz - 1] >> (23 - q0)
+        elif q0 == 0:
+            ih = iq[jz - 1] >> 23
+        elif z >= 0.5:
+            ih = 2
+        if ih > 0:  # the fraction q ≥ 0.5: n + 1 and 1 − q, negated at the end
+            n += 1
+            carry = 0
+            for i in range(jz):
+                j = iq[i]
+                if carry == 0:
+                    if j != 0:
+                        carry = 1
+                        iq[i] = 0x1000000 - j
+                else:
+                    iq[i] = 0xFFFFFF - j
+            if q0 == 1:  # rare: 1 in 12
+                iq[jz - 1] &= 0x7FFFFF
+            elif q0 == 2:
+                iq[jz - 1] &= 0x3FFFFF
+            if ih == 2:
+                z = 1.0 - z
+                if carry != 0:
+                    z -= math.ldexp(1.0, q0)
+        if z != 0.0:
+            break
+        j = 0
+        for i in range(jz - 1, jk - 1, -1):
+            j |= iq[i]
+        if j != 0:
+            break
+        k = 1  # the fraction's bits so far are all 0: k more parts of 2/π, and again
+        while iq[jk - k] == 0:
+            k += 1
+        for i in range(jz + 1, jz + k + 1):
+            f[jx + i] = float(_TWO_OVER_PI[jv + i])
+            fw = 0.0
+            for j in range(jx + 1):
+                fw += x[j] * f[jx + i - j]
+            q[i] = fw
+        jz += k
+    if z == 0.0:  # zero parts chopped off
+        jz -= 1
+        q0 -= 24
+        while iq[jz] == 0:
+            jz -= 1
+            q0 -= 24
+    else:  # z into 24-bit parts if need be
+        z = math.ldexp(z, -q0)
+        if z >= _TWO24:
+            fw = float(int(_TWON24 * z))
+            iq[jz] = int(z - _TWO24 * fw)
+            jz += 1
+            q0 += 24
+            iq[jz] = int(fw)
+        else:
+            iq[jz] = int(z)
+    fw = math.ldexp(1.0, q0)  # the integer parts as doubles
+    for i in range(jz, -1, -1):
+        q[i] = fw * float(iq[i])
+        fw *= _TWON24
+    for i in range(jz, -1, -1):  # fq = π/2's parts 0 ... jp times q[jz ... 0]
+        fw = 0.0
+        k = 0
+        while k <= jp and k <= jz - i:
+            fw += _PIO2_24[k] * q[i + k]
+            k += 1
+        fq[jz - i] = fw
+    fw = 0.0  # fq compressed into y0 + y1
+    for i in range(jz, -1, -1):
+        fw += fq[i]
+    y0 = fw if ih == 0 else -fw
+    fw = fq[0] - fw
+    for i in range(1, jz + 1):
+        fw += fq[i]
+    y1 = fw if ih == 0 else -fw
+    return n & 7, y0, y1
+
+
+@kernel
+def _rem_pio2(x: float) -> tuple[int, float, float]:
+    """n and y0 + y1 = x − n·π/2, |y0 + y1| ≲ π/4, for a finite x (fdlibm 5.3's e_rem_pio2.c). Below 2^20·π/2 (the
+    source's comment says 2^19) x − n·_PIO2_1 is exact, and 33 + 53, 66 + 53 or 99 + 53 bits of π/2 follow as the
+    cancellation needs; above, :func:`_kernel_rem_pio2` with x cut into 24-bit integers. The callers use n mod 4."""
+    ix = _high_word(abs(x))
+    if ix <= 0x3FE921FB:  # |x| ≲ π/4: no reduction
+        return 0, x, 0.0
+    if ix < 0x4002D97C:  # |x| < 3π/4: n = ±1
+        if x > 0.0:
+            z = x - _PIO2_1
+            if ix != 0x3FF921FB:  # 33 + 53 bits of π/2 are enough
+                y0 = z - _PIO2_1T
+                return 1, y0, (z - y0) - _PIO2_1T
+            z -= _PIO2_2  # near π/2: 33 + 33 + 53 bits
+            y0 = z - _PIO2_2T
+            return 1, y0, (z - y0) - _PIO2_2T
+        z = x + _PIO2_1
+        if ix != 0x3FF921FB:
+            y0 = z + _PIO2_1T
+            return -1, y0, (z - y0) + _PIO2_1T
+        z += _PIO2_2
+        y0 = z + _PIO2_2T
+        return -1, y0, (z - y0) + _PIO2_2T
+    if ix <= 0x413921FB:  # |x| ≲ 2^20·π/2: medium size
+        t = abs(x)
+        n = int(t * _INV_PIO2 + 0.5)
+        fn = float(n)
+        r = t - fn * _PIO2_1  # exact
+        w = fn * _PIO2_1T  # 1st round good to 85 bits
+        y0 = r - w
+        if n >= 32 or ix == _NPIO2_HW[n - 1]:  # x may be near n·π/2: check for cancellation
+            j = ix >> 20
+            i = j - (_high_word(abs(y0)) >> 20)
+            if i > 16:  # 2nd iteration needed, good to 118 bits
+                t = r
+                w = fn * _PIO2_2
+                r = t - w
+                w = fn * _PIO2_2T - ((t - r) - w)
+                y0 = r - w
+                i = j - (_high_word(abs(y0)) >> 20)
+                if i > 49:  # 3rd iteration, 151 bits: covers all possible cases
+                    t = r
+                    w = fn * _PIO2_3
+                    r = t - w
+                    w = fn * _PIO2_3T - ((t - r) - w)
+                    y0 = r - w
+        y1 = (r - y0) - w
+        if x < 0.0:
+            return -n, -y0, -y1
+        return n, y0, y1
+    return _rem_pio2_large(x, ix)
+
+
+@kernel
+def _rem_pio2_large(x: float, ix: int) -> tuple[int, float, float]:
+    """:func:`_rem_pio2` above 2^20·π/2, ix the high word of |x| (a kernel of its own, so that the path every
+    argument below 1.6 million takes holds no arrays)."""
+    e0 = (ix >> 20) - 1046  # |x| = z·2^e0 with z in [2^23, 2^24), cut into three 24-bit integers
+    z = math.ldexp(abs(x), -e0)
+    tx = np.empty(3, np.float64)
+    for i in range(2):
+        tx[i] = float(int(z))
+        z = (z - tx[i]) * _TWO24
+    tx[2] = z
+    nx = 3
+    while tx[nx - 1] == 0.0:  # zero parts skipped
+        nx -= 1
+    n, y0, y1 = _kernel_rem_pio2(tx, e0, nx)
+    if x < 0.0:
+        return -n, -y0, -y1
+    return n, y0, y1
+
+
+@kernel
+def sin_scalar(x: float) -> float:
+    """sin x (fdlibm 5.3's s_sin.c): x = n·π/2 + y with |y| ≲ π/4, then ±sin y or ±cos y by n mod 4. sin(±0) = ±0;
+    NaN for ±∞ and NaN."""
+    if x != x or math.isinf(x):
+        return x - x
+    if abs(x) < 0.7853984832763672:  # high word ≤ 0x3fe921fb: |x| ≲ π/4
+        return _kernel_sin(x, 0.0, 0)
+    n, y0, y1 = _rem_pio2(x)
+    n &= 3
+    if n == 0:
+        return _kernel_sin(y0, y1, 1)
+    if n == 1:
+        return _kernel_cos(y0, y1)
+    if n == 2:
+        return -_kernel_sin(y0, y1, 1)
+    return -_kernel_cos(y0, y1)
+
+
+@kernel
+def cos_scalar(x: float) -> float:
+    """cos x (fdlibm 5.3's s_cos.c): x = n·π/2 + y with |y| ≲ π/4, then ±cos y or ±sin y by n mod 4. cos(±0) = 1;
+    NaN for ±∞ and NaN."""
+    if x != x or math.isinf(x):
+        return x - x
+    if abs(x) < 0.7853984832763672:  # high word ≤ 0x3fe921fb: |x| ≲ π/4
+        return _kernel_cos(x, 0.0)
+    n, y0, y1 = _rem_pio2(x)
+    n &= 3
+    if n == 0:
+        return _kernel_cos(y0, y1)
+    if n == 1:
+        return -_kernel_sin(y0, y1, 1)
+    if n == 2:
+        return -_kernel_cos(y0, y1)
+    return _kernel_sin(y0, y1, 1)
+
+
+@kernel
+def tan_scalar(x: float) -> float:
+    """tan x (fdlibm 5.3's s_tan.c): x = n·π/2 + y with |y| ≲ π/4, then tan y for an even n, −1/tan y for an odd
+    one. tan(±0) = ±0; NaN for ±∞ and NaN."""
+    if x != x or math.isinf(x):
+        return x - x
+    if abs(x) < 0.7853984832763672:  # high word ≤ 0x3fe921fb: |x| ≲ π/4
+        return _kernel_tan(x, 0.0, 1)
+    n, y0, y1 = _rem_pio2(x)
+    return _kernel_tan(y0, y1, 1 - ((n & 1) << 1))
+
+
+@kernel
 def _exp_array(x, out):
     for i in range(x.size):
         out[i] = exp_scalar(x[i])
@@ -290,6 +691,24 @@ def _asin_array(x, out):
 def _atan2_array(y, x, out):
     for i in range(y.size):
         out[i] = atan2_scalar(y[i], x[i])
+
+
+@kernel
+def _sin_array(x, out):
+    for i in range(x.size):
+        out[i] = sin_scalar(x[i])
+
+
+@kernel
+def _cos_array(x, out):
+    for i in range(x.size):
+        out[i] = cos_scalar(x[i])
+
+
+@kernel
+def _tan_array(x, out):
+    for i in range(x.size):
+        out[i] = tan_scalar(x[i])
 
 
 def _unary(scalar, array, x):
@@ -320,6 +739,21 @@ def atan(x: ArrayLike) -> F64:
 def asin(x: ArrayLike) -> F64:
     """asin x with the same bits on every machine (NaN outside [−1, 1])."""
     return _unary(asin_scalar, _asin_array, x)
+
+
+def sin(x: ArrayLike) -> F64:
+    """sin x with the same bits on every machine, for every finite x (NaN for ±∞)."""
+    return _unary(sin_scalar, _sin_array, x)
+
+
+def cos(x: ArrayLike) -> F64:
+    """cos x with the same bits on every machine, for every finite x (NaN for ±∞)."""
+    return _unary(cos_scalar, _cos_array, x)
+
+
+def tan(x: ArrayLike) -> F64:
+    """tan x with the same bits on every machine, for every finite x (NaN for ±∞)."""
+    return _unary(tan_scalar, _tan_array, x)
 
 
 def atan2(y: ArrayLike, x: ArrayLike) -> F64:

@@ -1,6 +1,7 @@
 """engine.exact: the products agree with numpy's to rounding, sum in the documented order, and a whole game gives
 the same state hash whichever BLAS kernels numpy's OpenBLAS picks for the CPU; the elementary functions are within
-an ulp, give the same bits compiled and interpreted, and keep the demo's hash whatever SIMD code numpy picks."""
+an ulp (sin, cos and tan for every magnitude up to the largest double), give the same bits compiled and
+interpreted, and keep the demo's hash whatever SIMD code numpy picks."""
 
 from __future__ import annotations
 
@@ -101,7 +102,34 @@ def _inputs() -> dict[str, np.ndarray]:
             "cbrt": np.concatenate([rng.uniform(-1e3, 1e3, 300), signs[:300] * np.exp(rng.uniform(-700, 700, 300)),
                                     [5e-324, 1e-310, 27.0, -8.0, 1e300]]),
             "atan2": np.stack([rng.standard_normal(n) * np.exp(rng.uniform(-5, 5, n)),
-                               rng.standard_normal(n) * np.exp(rng.uniform(-5, 5, n))])}
+                               rng.standard_normal(n) * np.exp(rng.uniform(-5, 5, n))]),
+            "trig": np.concatenate(list(_trig_inputs(2000).values()))}
+
+
+def _trig_inputs(n: int) -> dict[str, np.ndarray]:
+    """Arguments of sin, cos and tan by magnitude, n of each (and a few named ones): fdlibm reduces |x| ≤ π/4 not at
+    all, |x| up to 2^20·π/2 ≈ 1647099 by π/2 in 33-bit parts (its comment says 2^19·π/2 ≈ 823550) and larger ones
+    with 2/π's bits (Payne–Hanek); multiples of π/2 and π/4 are where the reduction cancels most."""
+    rng = np.random.default_rng(11)
+    signs = rng.choice([-1.0, 1.0], n)
+
+    def log_uniform(lo: float, hi: float) -> np.ndarray:
+        return signs * np.exp(rng.uniform(math.log(lo), math.log(hi), n))
+
+    big = np.finfo(np.float64).max
+    return {"|x| < 1e-8": np.concatenate([rng.uniform(-1e-8, 1e-8, n), [5e-324, -1e-310, 2.0 ** -27, -2.0 ** -28]]),
+            "|x| < 1": rng.uniform(-1.0, 1.0, n),
+            "|x| < 10": rng.uniform(-10.0, 10.0, n),
+            "|x| < 1e3": rng.uniform(-1e3, 1e3, n),
+            "|x| < 1e6": rng.uniform(-1e6, 1e6, n),
+            "near 2^19·π/2": 2.0 ** 19 * (math.pi / 2) + rng.uniform(-1e3, 1e3, n),
+            "near 2^20·π/2": signs * (2.0 ** 20 * (math.pi / 2) + rng.uniform(-1e3, 1e3, n)),
+            "1e6 to 1e15": log_uniform(1e6, 1e15),
+            "1e15 to 1e22": np.concatenate([log_uniform(1e15, 1e22), [1e22, -1e22]]),
+            "near 1e300": signs * 1e300 * rng.uniform(0.5, 2.0, n),
+            "near DBL_MAX": np.concatenate([signs * rng.uniform(1.7e308, big, n), [1.7e308, big, -big]]),
+            "n·π/2": signs * rng.integers(1, 10 ** 6, n) * (math.pi / 2),
+            "n·π/4": signs * rng.integers(1, 10 ** 6, n) * (math.pi / 4)}
 
 
 def test_elementary_functions_are_within_an_ulp_of_the_true_value():
@@ -152,19 +180,58 @@ def test_elementary_functions_take_numbers_and_arrays_alike():
     assert exact.atan2(x, 2.0).tolist() == [[exact.atan2(float(v), 2.0) for v in row] for row in x]
 
 
+def test_sin_cos_tan_are_within_an_ulp_at_every_magnitude():
+    """Against the C library's (glibc's are within an ulp of the true value, as fdlibm's: so at most 1 apart), from
+    tiny arguments through the three reductions to the largest double, and at multiples of π/2 and π/4."""
+    for label, x in _trig_inputs(20000).items():
+        for name in ("sin", "cos", "tan"):
+            want = np.array([getattr(math, name)(v) for v in x])
+            assert _ulps(getattr(exact, name)(x), want).max() <= 1, (name, label)
+    assert exact.sin(1e22) == -0.8522008497671888 and exact.cos(1e22) == 0.523214785395139  # fdlibm's, glibc's
+
+
+def test_sin_cos_tan_special_values_as_the_c_library():
+    def same(a: float, b: float) -> bool:
+        return a == b and math.copysign(1.0, a) == math.copysign(1.0, b)
+
+    for x in (0.0, -0.0, 5e-324, -5e-324, 1e-300, -1e-300, 2.0 ** -28, -(2.0 ** -28), 7.45e-9, -7.45e-9):
+        assert same(exact.sin(x), x) and same(exact.tan(x), x) and exact.cos(x) == 1.0, x
+        assert same(exact.sin(x), math.sin(x)) and same(exact.tan(x), math.tan(x)), x
+    for x in (math.inf, -math.inf, math.nan):
+        assert math.isnan(exact.sin(x)) and math.isnan(exact.cos(x)) and math.isnan(exact.tan(x)), x
+    assert np.isnan(exact.sin(np.array([math.inf, -math.inf, math.nan]))).all()
+
+
+def test_sin_cos_tan_take_numbers_and_arrays_alike():
+    x = np.array([0.0, -0.0, 0.5, -2.0, 10.0, 823549.5, 1647100.0, -1e22, 1.7e308])
+    for name in ("sin", "cos", "tan"):
+        f = getattr(exact, name)
+        arr = f(x)
+        assert arr.dtype == np.float64 and isinstance(f(0.5), float) and isinstance(f(3), float)
+        assert arr.view(np.int64).tolist() == np.array([f(float(v)) for v in x]).view(np.int64).tolist(), name
+        for shape in ((0,), (3,), (2, 3)):
+            a = np.linspace(-4.0, 4.0, math.prod(shape)).reshape(shape)
+            out = f(a)
+            assert out.shape == shape and out.dtype == np.float64
+            assert out.ravel().tolist() == [f(float(v)) for v in a.ravel()]
+        assert f([1.0, 2.0]).tolist() == [f(1.0), f(2.0)]
+
+
 _BITS = """
 import hashlib, numpy as np
 from tests.engine.test_exact import _inputs
 from engine import exact
 data = _inputs()
 out = [getattr(exact, n)(data[n]) for n in ("exp", "atan", "asin", "cbrt")] + [exact.atan2(*data["atan2"])]
+out += [getattr(exact, n)(data["trig"]) for n in ("sin", "cos", "tan")]
 print(hashlib.sha256(b"".join(np.ascontiguousarray(o).tobytes() for o in out)).hexdigest())
 """
 
 
 def test_elementary_functions_give_the_same_bits_compiled_and_as_plain_python():
     """The compiled kernels against the same code run as Python floats (``NUMBA_DISABLE_JIT``), whose ``+ - * /``
-    round each operation alone: LLVM neither fused a multiply-add nor reordered a sum."""
+    round each operation alone: LLVM neither fused a multiply-add nor reordered a sum. sin, cos and tan are
+    compared at every magnitude, so each of their argument reductions (Payne–Hanek's too) is."""
     results = []
     for env in ({}, {"NUMBA_DISABLE_JIT": "1"}):
         out = subprocess.run([sys.executable, "-c", _BITS], capture_output=True, text=True, check=True, cwd=ROOT,
