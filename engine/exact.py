@@ -26,8 +26,9 @@ machine). Python's ``math`` and numba's calls go to the C library, which differs
 written with ``+ - * /`` (no fused multiply-adds: the kernels compile without fast-math), ``frexp``/``ldexp``,
 integers and comparisons only, so they give the same bits everywhere: fdlibm's algorithms (Sun's freely
 distributable libm, the reference of Java's ``StrictMath``), within one unit in the last place of the true value.
-Each is a compiled scalar function that other kernels call, and takes a number or an array. ``np.sqrt``,
-``np.tanh`` and ``np.hypot`` gave the same bits with and without AVX-512 and are used directly. ``np.sin`` and
+Each is a compiled scalar function that other kernels call, and takes a number or an array. ``np.sqrt`` is
+correctly rounded by IEEE 754 everywhere. ``np.tanh`` and ``np.hypot`` gave the same bits with and without
+AVX-512 and are used directly (``hypot`` is the C library's, so not guaranteed on other systems). ``np.sin`` and
 ``np.cos`` did too, but they call the C library's ``sin`` and ``cos``, and glibc's, macOS's and Windows' are
 different code whose last bits differ: :func:`sin`, :func:`cos` and :func:`tan` replace them wherever a result
 decides simulation state (on 3.8 million arguments of every magnitude they gave the bits of Java 17's

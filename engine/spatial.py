@@ -12,6 +12,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from engine import exact
+
 __all__ = [
     "Transform",
     "quat_conjugate",
@@ -54,8 +56,8 @@ def quat_from_axis_angle(axis: ArrayLike, angle: ArrayLike) -> F64:
     if np.any(norm == 0.0):
         raise ValueError(f"rotation axis must be non-zero, got {axis.tolist()}")
     half = 0.5 * np.asarray(angle, dtype=np.float64)[..., None]
-    vector = np.sin(half) * axis / norm
-    return np.concatenate([np.broadcast_to(np.cos(half), vector.shape[:-1] + (1,)), vector], axis=-1)
+    vector = exact.sin(half) * axis / norm
+    return np.concatenate([np.broadcast_to(exact.cos(half), vector.shape[:-1] + (1,)), vector], axis=-1)
 
 
 def quat_mul(a: ArrayLike, b: ArrayLike) -> F64:
@@ -93,7 +95,7 @@ def _axis_scalar(angle: float, axis: tuple[float, float, float]) -> tuple[float,
     """:func:`quat_from_axis_angle` of one unit coordinate axis, in the same operations (sin and cos by numpy,
     the products and the division by the norm 1 as written there, zero components keeping their sign)."""
     half = np.float64(0.5 * angle)
-    s, c = float(np.sin(half)), float(np.cos(half))
+    s, c = exact.sin_scalar(half), exact.cos_scalar(half)
     return c, s * axis[0] / 1.0, s * axis[1] / 1.0, s * axis[2] / 1.0
 
 

@@ -10,6 +10,7 @@ import math
 import numpy as np
 from pydantic import Field
 
+from engine import exact
 from engine.config import ConfigModel, Vec3
 from engine.script import Script, script
 from engine.spatial import Transform, quat_from_axis_angle, quat_mul, quat_normalize
@@ -48,7 +49,7 @@ class Bob(Script):
         if self.ctx.paused:
             return
         self.time += dt
-        y = self.base_y + self.params.amplitude * math.sin(2.0 * math.pi * self.params.frequency * self.time
+        y = self.base_y + self.params.amplitude * exact.sin_scalar(2.0 * math.pi * self.params.frequency * self.time
                                                            + self.phase)
         self.ctx.get(Transform).position[1] = y
 

@@ -13,6 +13,8 @@ threadpoolctl (the standard tool for this, used by scikit-learn and joblib).
 
 from __future__ import annotations
 
+import contextlib
+
 import logging
 import os
 
@@ -47,4 +49,8 @@ def limit_blas_threads() -> None:
         return
     from threadpoolctl import threadpool_limits
 
+    # threadpoolctl limits the libraries loaded so far. numba's first call of any compiled kernel loads scipy's
+    # own OpenBLAS (for np.linalg inside kernels), which would then start with a thread per core: load it first.
+    with contextlib.suppress(ImportError):
+        import scipy.linalg.cython_blas  # noqa: F401
     _applied.append(threadpool_limits(limits=threads, user_api="blas"))

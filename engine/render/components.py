@@ -17,6 +17,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from engine.config import Color3, ConfigModel, CrossFieldError, Vec3, Vec4
+from engine import exact
 from engine.exact import length, matvec, vecmat
 from engine.input import InputState
 from engine.spatial import Transform, cross, quat_from_euler, quat_rotate
@@ -161,7 +162,7 @@ class CameraInput:
 # ------------------------------------------------------------------------ matrices
 def perspective(fov_y: float, aspect: float, near: float, far: float) -> np.ndarray:
     """OpenGL perspective projection (column-vector convention), float64."""
-    f = 1.0 / math.tan(fov_y / 2.0)
+    f = 1.0 / exact.tan_scalar(fov_y / 2.0)
     m = np.zeros((4, 4))
     m[0, 0] = f / aspect
     m[1, 1] = f

@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from components.dust_devil import DustDevilConfig, DustDevilState
+from engine import exact
 from engine.heightfield import HeightField
 from engine.spatial import Transform, quat_conjugate, quat_is_identity, quat_rotate
 from systems.dust_devil.tornado import WindField, centre_line, to_unit
@@ -152,7 +153,7 @@ def emit(cfg: DustDevilConfig, state: DustDevilState, which: NDArray[np.intp], t
         return
     radius = cfg.emission_radius * np.sqrt(draws[:, 0])
     angle = 2.0 * np.pi * draws[:, 1]
-    offset = np.stack([radius * np.cos(angle), radius * np.sin(angle)], axis=-1)
+    offset = np.stack([radius * exact.cos(angle), radius * exact.sin(angle)], axis=-1)
     sx, sy, sz = cfg.field_size
     half = np.array([0.5 * sx, 0.5 * sz])
     local = np.zeros((n, 3))
@@ -175,11 +176,11 @@ def _emit_kernel(cfg: DustDevilConfig, state: DustDevilState, which: NDArray[np.
                  ground: Ground | None, draws: F64) -> None:
     """:func:`emit` after its random draws, as two passes of the compiled kernels.emit_particles (the same
     bits): the particles' feet on the ground under the centre line's foot, then, with the centre line looked up
-    at those heights, their final places.  The float64 sin and cos stay in numpy (the angle, the centre line)."""
+    at those heights, their final places.  The sin and cos stay outside (the angle, the centre line: engine.exact)."""
     from systems.dust_devil.kernels import emit_particles
 
     angle = 2.0 * np.pi * draws[:, 1]
-    cos_angle, sin_angle = np.cos(angle), np.sin(angle)
+    cos_angle, sin_angle = exact.cos(angle), exact.sin(angle)
     sx, sy, sz = cfg.field_size
     heights, origin, spacing, ground_position = _ground_args(ground)
     feet = np.empty(len(draws))

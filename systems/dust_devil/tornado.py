@@ -15,6 +15,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from engine import exact
+
 __all__ = ["crawfis_tornado", "centre_line", "wind_grid", "wind_at_nodes", "WindField",
            "lookup_nodes", "gather_wind", "sample_wind", "to_unit", "grid_points"]
 
@@ -29,10 +31,10 @@ def centre_line(cz: ArrayLike, t: float, rotation: float = 0.0) -> tuple[F64, F6
         xc = 0.5 + 0.1 sin(0.04 t + 10 z),   yc = 0.5 + 0.1 cos(0.03 t + 3 z)
     """
     cz = np.asarray(cz, dtype=np.float64)
-    ox = 0.1 * np.sin(0.04 * t + 10.0 * cz)
-    oy = 0.1 * np.cos(0.03 * t + 3.0 * cz)
+    ox = 0.1 * exact.sin(0.04 * t + 10.0 * cz)
+    oy = 0.1 * exact.cos(0.03 * t + 3.0 * cz)
     if rotation:
-        c, s = np.cos(np.float64(rotation)), np.sin(np.float64(rotation))
+        c, s = exact.cos_scalar(float(rotation)), exact.sin_scalar(float(rotation))
         ox, oy = c * ox + s * oy, -s * ox + c * oy  # clockwise about +z: +x turns towards -y
     return 0.5 + ox, 0.5 + oy
 
@@ -40,7 +42,7 @@ def centre_line(cz: ArrayLike, t: float, rotation: float = 0.0) -> tuple[F64, F6
 def _slices(cz: F64, t: float, rotation: float) -> tuple[F64, F64, F64, F64]:
     """The terms of ``gen_tornado`` that depend on the height alone: (xc, yc, r, r2) of each z value."""
     xc, yc = centre_line(cz, t, rotation)
-    r = 0.1 + 0.4 * cz * cz + 0.1 * cz * np.sin(8.0 * cz)
+    r = 0.1 + 0.4 * cz * cz + 0.1 * cz * exact.sin(8.0 * cz)
     r2 = 0.2 + 0.1 * cz
     return xc, yc, r, r2
 

@@ -419,7 +419,7 @@ def _emit(emitters: list[_Emitter], dt: float) -> None:
     phase = (serial + u_phase) / np.repeat(counts.astype(np.float64), counts)  # stratified over the step
     r = _per_row([e.cfg.beam_radius for e, _ in spawning], counts) * np.sqrt(u_radius)
     theta = 2.0 * np.pi * u_angle
-    disc = (r * np.cos(theta))[:, None] * right + (r * np.sin(theta))[:, None] * up
+    disc = (r * exact.cos(theta))[:, None] * right + (r * exact.sin(theta))[:, None] * up
     speed = _per_row([e.cfg.beam_speed for e, _ in spawning], counts)
     position = (np.repeat(np.array([e.transform.position for e, _ in spawning], np.float64), counts, axis=0) + disc
                 + (phase * speed * dt)[:, None] * forward)

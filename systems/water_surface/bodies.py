@@ -79,7 +79,7 @@ def _columns(rings: int, angles: int) -> tuple[F64, F64, F64]:
     rho = np.sqrt(0.5 * (t + 1.0))
     angle = (np.arange(angles) + 0.5) * (2.0 * np.pi / angles)
     r, a = np.meshgrid(rho, angle, indexing="ij")
-    centres = np.stack([r * np.cos(a), np.zeros_like(r), r * np.sin(a)], -1).reshape(-1, 3)
+    centres = np.stack([r * exact.cos(a), np.zeros_like(r), r * exact.sin(a)], -1).reshape(-1, 3)
     chords = 2.0 * np.sqrt(1.0 - r * r).ravel()
     share = (np.repeat(weight, angles) * chords)  # area weight × chord: each column's volume
     return centres, chords, share / share.sum()

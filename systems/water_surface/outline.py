@@ -21,6 +21,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from engine import exact
 from engine.exact import atan2, matmul
 from systems.water_surface.geometry import (BOX, EPS_LINE, F64, I64, NUDGE, Bodies, Grid, all_of, any_of, max_of,
                                             min_of, ranges, sum_of)
@@ -249,7 +250,7 @@ def _sort_ccw(u: F64, v: F64, valid: np.ndarray, exact: bool) -> tuple[F64, I64,
 def sphere_ring(segments: int) -> F64:
     """(segments, 2) unit circle counter-clockwise in (u, v)."""
     angles = 2.0 * np.pi * np.arange(segments) / segments
-    ring = np.stack([np.cos(angles), np.sin(angles)], axis=-1)
+    ring = np.stack([exact.cos(angles), exact.sin(angles)], axis=-1)
     ring.setflags(write=False)
     return ring
 

@@ -6,8 +6,10 @@ import sys
 
 CHECK = """
 import json, threadpoolctl
+from engine import exact
 from engine.app import App
 App()
+exact.sin(1.0)  # a compiled kernel's first call loads numba's BLAS (scipy's OpenBLAS): limited too
 print(json.dumps([pool["num_threads"] for pool in threadpoolctl.threadpool_info() if pool["user_api"] == "blas"]))
 """
 
