@@ -18,22 +18,24 @@ The arrays are small (3- and 4-vectors, 3 × 3 and 4 × 4 matrices, stacks of th
 numpy calls per summed index.
 
 The elementary functions here (:func:`exp`, :func:`cbrt`, :func:`atan`, :func:`atan2`, :func:`asin`, :func:`sin`,
-:func:`cos`, :func:`tan`) exist for the same reason. numpy computes ``np.exp``, ``np.log``, ``np.power``,
-``np.cbrt``, ``np.arctan2``, ``np.arccos`` and others with SIMD code chosen by the CPU: on a CPU with AVX-512
-(numpy's ``AVX512_SKX`` dispatch) float64 ``exp``, ``cbrt`` and ``arctan2`` give other last bits than on an AVX2
-or older one, and the demo's state hash after its autoplay differed (``NPY_DISABLE_CPU_FEATURES`` shows it on one
-machine). Python's ``math`` and numba's calls go to the C library, which differs between systems. These are
+:func:`cos`, :func:`tan`, :func:`hypot`) exist for the same reason. numpy computes ``np.exp``, ``np.log``,
+``np.power``, ``np.cbrt``, ``np.arctan2``, ``np.arccos`` and others with SIMD code chosen by the CPU: on a CPU with
+AVX-512 (numpy's ``AVX512_SKX`` dispatch) float64 ``exp``, ``cbrt`` and ``arctan2`` give other last bits than on an
+AVX2 or older one, and the demo's state hash after its autoplay differed (``NPY_DISABLE_CPU_FEATURES`` shows it on
+one machine). Python's ``math`` and numba's calls go to the C library, which differs between systems. These are
 written with ``+ - * /`` (no fused multiply-adds: the kernels compile without fast-math), ``frexp``/``ldexp``,
 integers and comparisons only, so they give the same bits everywhere: fdlibm's algorithms (Sun's freely
 distributable libm, the reference of Java's ``StrictMath``), within one unit in the last place of the true value.
 Each is a compiled scalar function that other kernels call, and takes a number or an array. ``np.sqrt`` is
-correctly rounded by IEEE 754 everywhere. ``np.tanh`` and ``np.hypot`` gave the same bits with and without
-AVX-512 and are used directly (``hypot`` is the C library's, so not guaranteed on other systems). ``np.sin`` and
-``np.cos`` did too, but they call the C library's ``sin`` and ``cos``, and glibc's, macOS's and Windows' are
-different code whose last bits differ: :func:`sin`, :func:`cos` and :func:`tan` replace them wherever a result
-decides simulation state (on 3.8 million arguments of every magnitude they gave the bits of Java 17's
-``StrictMath``). They reduce every finite argument correctly, 1e22 and 1.7e308 included: by π/2 split in three
-33-bit parts below about 1.6 million, and with 1584 bits of 2/π above (Payne and Hanek's method).
+correctly rounded by IEEE 754 everywhere. ``np.tanh`` gave the same bits with and without AVX-512 and is used
+directly. ``np.sin``, ``np.cos`` and ``np.hypot`` did too, but they call the C library's ``sin``, ``cos`` and
+``hypot``, and glibc's, macOS's and Windows' are different code whose last bits differ (numba compiles ``math.sin``,
+``math.hypot`` and ``np.hypot`` in a kernel to calls of the same C functions; CPython's own ``math.hypot`` is an
+algorithm of its own again): :func:`sin`, :func:`cos`, :func:`tan` and :func:`hypot` replace them wherever a result
+decides simulation state (on 3.8 million arguments of every magnitude sin, cos and tan gave the bits of Java 17's
+``StrictMath``, and hypot on 1.1 million pairs). sin, cos and tan reduce every finite argument correctly, 1e22 and
+1.7e308 included: by π/2 split in three 33-bit parts below about 1.6 million, and with 1584 bits of 2/π above (Payne
+and Hanek's method).
 """
 
 from __future__ import annotations
@@ -45,8 +47,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from engine.jit import kernel
 
-__all__ = ["asin", "atan", "atan2", "cbrt", "cos", "dot", "exp", "inverse", "length", "matmul", "matvec", "sin",
-           "tan", "vecmat"]
+__all__ = ["asin", "atan", "atan2", "cbrt", "cos", "dot", "exp", "hypot", "inverse", "length", "matmul", "matvec",
+           "sin", "tan", "vecmat"]
 
 F64 = NDArray[np.float64]
 
@@ -180,6 +182,10 @@ _PIO2_24 = np.array([  # π/2 cut in 24-bit parts (k_rem_pio2.c's PIo2)
 # The three tables are arrays: numba compiles a tuple indexed at run time to a switch, which took 10 ns a sine.
 _TWO24 = 1.67772160000000000000e+07  # 2^24
 _TWON24 = 5.96046447753906250000e-08  # 2^-24
+_TWO600 = 4.149515568880993e+180  # 2^600 (e_hypot.c's scaling of tiny arguments)
+_TWON600 = 2.409919865102884e-181  # 2^-600 (of huge ones)
+_TWO1022 = 4.49423283715579e+307  # 2^1022 (of subnormal ones)
+_TWON1022 = 2.2250738585072014e-308  # 2^-1022
 
 
 @kernel
@@ -329,6 +335,16 @@ def _clear_low_word(x: float) -> float:
         return math.copysign(math.ldexp(float(int(math.ldexp(x, 1042))), -1042), x)
     m, e = math.frexp(x)
     return math.ldexp(float(int(m * 2097152.0)), e - 21)
+
+
+@kernel
+def _from_high_word(h: int) -> float:
+    """The double whose upper 32 bits are h (0 ≤ h < 0x7ff00000) and lower 32 bits 0 (fdlibm's ``t = 0;
+    __HI(t) = h``): the fraction's leading 20 bits with 1 before them, or without it for the exponent field 0."""
+    e = h >> 20
+    if e == 0:
+        return math.ldexp(float(h), -1042)
+    return math.ldexp(float((h & 0xFFFFF) | 0x100000), e - 1043)
 
 
 @kernel
@@ -665,6 +681,68 @@ def tan_scalar(x: float) -> float:
 
 
 @kernel
+def hypot_scalar(x: float, y: float) -> float:
+    """√(x² + y²) without undue overflow or underflow (fdlibm 5.3's e_hypot.c): arguments above 2^500 scaled by
+    2^-600, below 2^-500 by 2^600 (subnormal ones by 2^1022); the larger one's square and the sum split in parts of
+    21 bits (high words) and the rest, so that the sum under the root errs by less than its last bit. Within an ulp
+    of the true value (0.97 at most measured), but where an argument is subnormal: fdlibm then splits with the
+    unscaled high words (up to 1.19 measured). +∞ when either is ±∞ (a NaN in the other too), NaN for a NaN
+    otherwise, as C's ``hypot``. |x| and |y| are ordered by their whole values, as in Java's ``StrictMath`` port
+    (fdlibm compares their high words only)."""
+    a = abs(x)
+    b = abs(y)
+    if math.isinf(a) or math.isinf(b):
+        return math.inf
+    if a != a or b != b:
+        return a + b
+    if b > a:
+        a, b = b, a
+    ha = _high_word(a)
+    hb = _high_word(b)
+    if ha - hb > 0x3C00000:  # a/b > 2^60: b does not reach a's last bit
+        return a + b
+    k = 0
+    if ha > 0x5F300000:  # a > 2^500: both scaled by 2^-600 (exact: b > 2^439 here)
+        ha -= 0x25800000
+        hb -= 0x25800000
+        a *= _TWON600
+        b *= _TWON600
+        k = 600
+    if hb < 0x20B00000:  # b < 2^-500
+        if hb <= 0x000FFFFF:  # subnormal b or 0
+            if b == 0.0:
+                return a
+            b *= _TWO1022  # ha and hb are not updated, as in fdlibm 5.3 and Java's port: the splits below take
+            a *= _TWO1022  # the unscaled high words, t1 + t2 is still a but a² rounded (1.19 ulps seen, not 0.84)
+            k -= 1022
+        else:  # scaled by 2^600
+            ha += 0x25800000
+            hb += 0x25800000
+            a *= _TWO600
+            b *= _TWO600
+            k -= 600
+    w = a - b
+    if w > b:  # a > 2b: a² = t1² + t2·(a + t1), t1 the high word of a
+        t1 = _from_high_word(ha)
+        t2 = a - t1
+        w = math.sqrt(t1 * t1 - (b * (-b) - t2 * (a + t1)))
+    else:  # a² + b² = (a − b)² + 2a·b, 2a = t1 + t2 and b = y1 + y2 split by their high words
+        a = a + a
+        y1 = _from_high_word(hb)
+        y2 = b - y1
+        t1 = _from_high_word(ha + 0x00100000)
+        t2 = a - t1
+        w = math.sqrt(t1 * y1 - (w * (-w) - (t1 * y2 + t2 * b)))
+    if k == 600:
+        return w * _TWO600
+    if k == -600:
+        return w * _TWON600
+    if k == -1022:
+        return w * _TWON1022
+    return w
+
+
+@kernel
 def _exp_array(x, out):
     for i in range(x.size):
         out[i] = exp_scalar(x[i])
@@ -695,6 +773,12 @@ def _atan2_array(y, x, out):
 
 
 @kernel
+def _hypot_array(x, y, out):
+    for i in range(x.size):
+        out[i] = hypot_scalar(x[i], y[i])
+
+
+@kernel
 def _sin_array(x, out):
     for i in range(x.size):
         out[i] = sin_scalar(x[i])
@@ -720,6 +804,16 @@ def _unary(scalar, array, x):
     out = np.empty_like(flat)
     array(flat, out)
     return out.reshape(a.shape)
+
+
+def _binary(scalar, array, x, y):
+    if np.ndim(x) == 0 and np.ndim(y) == 0 and not isinstance(x, np.ndarray) and not isinstance(y, np.ndarray):
+        return float(scalar(float(x), float(y)))
+    b = np.broadcast_arrays(np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64))
+    xs, ys = (np.ascontiguousarray(a).reshape(-1) for a in b)
+    out = np.empty_like(xs)
+    array(xs, ys, out)
+    return out.reshape(b[0].shape)
 
 
 def exp(x: ArrayLike) -> F64:
@@ -759,10 +853,9 @@ def tan(x: ArrayLike) -> F64:
 
 def atan2(y: ArrayLike, x: ArrayLike) -> F64:
     """The angle of (x, y), as ``np.arctan2(y, x)``, with the same bits on every machine; y and x broadcast."""
-    if np.ndim(y) == 0 and np.ndim(x) == 0 and not isinstance(y, np.ndarray) and not isinstance(x, np.ndarray):
-        return float(atan2_scalar(float(y), float(x)))
-    b = np.broadcast_arrays(np.asarray(y, dtype=np.float64), np.asarray(x, dtype=np.float64))
-    ys, xs = (np.ascontiguousarray(a).reshape(-1) for a in b)
-    out = np.empty_like(ys)
-    _atan2_array(ys, xs, out)
-    return out.reshape(b[0].shape)
+    return _binary(atan2_scalar, _atan2_array, y, x)
+
+
+def hypot(x: ArrayLike, y: ArrayLike) -> F64:
+    """√(x² + y²), as ``np.hypot(x, y)``, with the same bits on every machine; x and y broadcast."""
+    return _binary(hypot_scalar, _hypot_array, x, y)
