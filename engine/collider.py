@@ -8,14 +8,13 @@ takes N points or rays at once and returns world-space results. Signed distances
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Literal, get_args
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from engine.exact import dot
+from engine.exact import dot, hypot, hypot_scalar
 from engine.heightfield import HeightField
 from engine.jit import kernel, maximum, minimum
 from engine.spatial import Transform, quat_conjugate, quat_is_identity, quat_rotate
@@ -344,7 +343,7 @@ class Collider:
         t_start = np.maximum(t_lo.max(axis=-1), 0.0)
         t_end = np.minimum(t_hi.min(axis=-1), max_t)
         active = (t_start <= t_end) & (d != 0.0).any(axis=-1)  # a ray without direction meets nothing it is not in
-        horizontal = np.hypot(d[:, 0], d[:, 2]) * np.where(active, t_end - t_start, 0.0)
+        horizontal = hypot(d[:, 0], d[:, 2]) * np.where(active, t_end - t_start, 0.0)
         return t_start, t_end, active, self._heightfield_steps(np.max(horizontal, initial=0.0))
 
     def _ray_heightfield_numpy(self, o: F64, d: F64, transform: Transform, max_t: float) -> RayHits:
@@ -524,7 +523,7 @@ def _heightfield_interval_kernel(o: F64, d: F64, lo: F64, hi: F64, max_t: float
         end = minimum(minimum(minimum(far0, far1), far2), max_t)
         live = start <= end and (d[i, 0] != 0.0 or d[i, 1] != 0.0 or d[i, 2] != 0.0)
         t_start[i], t_end[i], active[i] = start, end, live
-        longest = maximum(longest, math.hypot(d[i, 0], d[i, 2]) * (end - start if live else 0.0))
+        longest = maximum(longest, hypot_scalar(d[i, 0], d[i, 2]) * (end - start if live else 0.0))
     return t_start, t_end, active, longest
 
 

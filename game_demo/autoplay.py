@@ -123,7 +123,7 @@ class AutoPilot:
         if devil is not None:
             d = world.get(devil, Transform).position
             danger = self.danger_radius if self.danger_radius is not None else danger_radius(world)
-            if math.hypot(d[0] - p.position[0], d[2] - p.position[2]) < danger:
+            if exact.hypot_scalar(d[0] - p.position[0], d[2] - p.position[2]) < danger:
                 if self._plan_drag(world, p.position, d, out):
                     return out
         self._press("right", out)
@@ -138,9 +138,9 @@ class AutoPilot:
             self._release("w", out)
             return
         pos = p.position
-        entity, goal = min(targets, key=lambda t: (math.hypot(t[1][0] - pos[0], t[1][2] - pos[2]), t[0]))
+        entity, goal = min(targets, key=lambda t: (exact.hypot_scalar(t[1][0] - pos[0], t[1][2] - pos[2]), t[0]))
         dx, dz = goal[0] - pos[0], goal[2] - pos[2]
-        dist = math.hypot(dx, dz)
+        dist = exact.hypot_scalar(dx, dz)
         f = p.forward()
         yaw, pitch = exact.atan2(-f[0], -f[2]), exact.asin(max(-1.0, min(1.0, f[1])))
         want_yaw = exact.atan2(-dx, -dz)

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-import numpy as np
 from pydantic import Field
 
+from engine import exact
 from engine.config import ConfigModel
 from engine.render.components import Hud
 from engine.script import Script, script
@@ -67,7 +67,7 @@ class GameRules(Script):
             return float("inf")
         a = self.ctx.get(Transform, player).position
         b = self.ctx.get(Transform, devil).position
-        return float(np.hypot(a[0] - b[0], a[2] - b[2]))
+        return float(exact.hypot_scalar(a[0] - b[0], a[2] - b[2]))
 
     def _hud(self, state) -> None:
         count = f"{state.targets_left}/{state.targets_total}" if state.targets_total else "-"  # none placed yet

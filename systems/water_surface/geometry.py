@@ -12,6 +12,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from engine import exact
+
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
 
@@ -178,7 +180,7 @@ def inside_polygons(points: F64, polygons: F64, counts: I64, margin: float = 1e-
     e = b - a
     r = points[:, None, :] - a
     cross = e[..., 0] * r[..., 1] - e[..., 1] * r[..., 0]
-    length = np.hypot(e[..., 0], e[..., 1])
+    length = exact.hypot(e[..., 0], e[..., 1])
     return np.all((cross > margin * length) | ~valid, axis=1) & (counts >= 3)
 
 

@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from engine.exact import atan2_scalar
+from engine.exact import atan2_scalar, hypot_scalar
 from engine.jit import kernel, pairwise_sum
 
 # Constants of outline.py / geometry.py, repeated as plain numbers for the compiled code.
@@ -582,7 +582,7 @@ def edge_table(polygons, counts):
             au, av = polygons[b, k, 0], polygons[b, k, 1]
             eu, ev = polygons[b, nxt, 0] - au, polygons[b, nxt, 1] - av
             length2 = eu * eu + ev * ev
-            length = np.hypot(eu, ev)  # C's hypot, as numpy's (Python's math.hypot rounds some pairs otherwise)
+            length = hypot_scalar(eu, ev)
             real = valid and length > 0.0
             inv = 1.0 / length if real else 0.0
             nu, nv = ev * (inv * -1.0), eu * (inv * 1.0)
@@ -650,7 +650,7 @@ def outline_impulse(uv, body, before, has_before, after, h, alpha, nb):
             lowered[i] = _inside(before, b, u, v, -ON_OUTLINE)
         else:
             bu, bv = u, v
-        d = np.hypot(u - bu, v - bv) * h  # eq. 2.5 (np.hypot: the same bits with NUMBA_DISABLE_JIT=1)
+        d = hypot_scalar(u - bu, v - bv) * h  # eq. 2.5
         sign = (1.0 if raised[i] else 0.0) - (1.0 if lowered[i] else 0.0)
         change[i] = alpha * d * sign  # eq. 2.6 / 2.7
         total[b] += change[i]

@@ -86,7 +86,7 @@ class Edges:
         e = start[:, np.arange(b)[:, None], nxt] - start
         ee = e * e
         length2 = ee[0] + ee[1]
-        length = np.hypot(e[0], e[1])
+        length = exact.hypot(e[0], e[1])
         real = valid & (length > 0.0)
         inv = np.where(real, 1.0 / np.where(real, length, 1.0), 0.0)
         n = e[::-1] * (inv * _FLIP)  # (−e_y, e_x) / |e|: the inward (left) normal
@@ -410,7 +410,7 @@ def outline_impulse(points: AddedPoints, sections: Sections, previous: Sections,
     if not every:
         back = np.where(old[:, None], back, points.uv)
     gap = points.uv - back
-    d = np.hypot(gap[:, 0], gap[:, 1]) * grid.h  # eq. 2.5
+    d = exact.hypot(gap[:, 0], gap[:, 1]) * grid.h  # eq. 2.5
     if not every:
         raised &= old
         lowered &= old

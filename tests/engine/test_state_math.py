@@ -12,7 +12,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 
-FUNCTIONS = {"sin", "cos", "tan", "exp", "exp2", "expm1", "log", "log2", "log10", "log1p", "power", "pow",
+FUNCTIONS = {"sin", "cos", "tan", "hypot", "exp", "exp2", "expm1", "log", "log2", "log10", "log1p", "power", "pow",
              "float_power", "cbrt", "arcsin", "arccos", "arctan", "arctan2", "asin", "acos", "atan", "atan2",
              "sinh", "cosh", "arcsinh", "arccosh", "arctanh", "asinh", "acosh", "atanh", "erf", "gamma", "lgamma"}
 DRAWING = {"render.py", "extract.py", "mesh.py", "display.py", "frontend.py", "feature.py", "graph.py", "passes.py",
