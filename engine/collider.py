@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from engine.exact import dot, hypot, hypot_scalar
+from engine.exact import length as exact_length
 from engine.heightfield import HeightField
 from engine.jit import kernel, maximum, minimum
 from engine.spatial import Transform, quat_conjugate, quat_is_identity, quat_rotate
@@ -83,7 +84,7 @@ class Collider:
         if self.radius < 0.0:
             raise ValueError(f"Collider.radius must be >= 0, got {self.radius}")
         normal = np.array(self.normal, dtype=np.float64)
-        length = np.linalg.norm(normal) if normal.shape == (3,) else 0.0
+        length = float(exact_length(normal)) if normal.shape == (3,) else 0.0
         if length == 0.0:
             raise ValueError(f"Collider.normal must be a non-zero 3-vector, got {normal.tolist()}")
         self.normal = normal / length

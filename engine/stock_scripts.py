@@ -67,7 +67,7 @@ class WasdMover(Script):
         inp = self.ctx.input
         move = np.array([inp.is_down("d") - inp.is_down("a"), 0.0, inp.is_down("s") - inp.is_down("w")], float)
         if move.any():
-            self.ctx.get(Transform).position += move / np.linalg.norm(move) * self.params.speed * dt
+            self.ctx.get(Transform).position += move / exact.length(move) * self.params.speed * dt
 
 
 @script("spawner")

@@ -171,7 +171,7 @@ class AutoPilot:
         if top is None:
             return False
         away = np.array([devil_pos[0] - player_pos[0], 0.0, devil_pos[2] - player_pos[2]])
-        n = np.linalg.norm(away)
+        n = float(exact.length(away))
         away = away / n if n > 1e-6 else np.array([1.0, 0.0, 0.0])
         goal = devil_pos + away * self.drag_distance
         start_px = self._to_pixels(world, top, devil_pos)

@@ -149,7 +149,7 @@ def camera_controllers(world: World, dt: float) -> None:
             move = np.array([inp.is_down("d") - inp.is_down("a"), inp.is_down("e") - inp.is_down("q"),
                              inp.is_down("s") - inp.is_down("w")], float)
             if move.any():
-                t.position = t.position + quat_rotate(t.rotation, move / np.linalg.norm(move)) * cfg.move_speed * dt
+                t.position = t.position + quat_rotate(t.rotation, move / length(move)) * cfg.move_speed * dt
 
 
 @dataclass

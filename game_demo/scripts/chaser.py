@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 from pydantic import Field
 
+from engine import exact
 from engine.config import ConfigModel
 from engine.script import Script, script
 from engine.spatial import Transform
@@ -27,7 +28,7 @@ class DustDevilChaser(Script):
         here = self.ctx.get(Transform).position
         there = self.ctx.get(Transform, player).position
         d = np.array([there[0] - here[0], 0.0, there[2] - here[2]])
-        dist = float(np.linalg.norm(d))
+        dist = float(exact.length(d))
         if dist > 1e-6:
             step = d / dist * min(self.params.speed * dt, dist)
             self.ctx.call("dust_devil.drag", delta=step)

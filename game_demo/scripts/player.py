@@ -8,6 +8,7 @@ import math
 import numpy as np
 from pydantic import Field
 
+from engine import exact
 from engine.config import ConfigModel, Vec4
 from engine.script import Script, script
 from engine.spatial import Transform, quat_from_euler, quat_rotate
@@ -96,7 +97,7 @@ class Player(Script):
         move = np.array([inp.is_down("d") - inp.is_down("a"), 0.0, inp.is_down("s") - inp.is_down("w")], float)
         if move.any():
             heading = quat_from_euler(self.yaw, 0.0, 0.0)
-            step = quat_rotate(heading, move / np.linalg.norm(move)) * self.params.move_speed * dt
+            step = quat_rotate(heading, move / exact.length(move)) * self.params.move_speed * dt
             limit = max(terrain_extent(self.ctx, self.params.area_half_size) - self.params.edge_margin, 0.0)
             t.position[0] = float(np.clip(t.position[0] + step[0], -limit, limit))
             t.position[2] = float(np.clip(t.position[2] + step[2], -limit, limit))

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-import numpy as np
 from pydantic import Field
 
+from engine import exact
 from engine.config import ConfigModel
 from engine.impacts import Impact
 from engine.script import Script, script
@@ -33,7 +33,7 @@ class TargetScript(Script):
         if target is None:
             return
         damage = max(self.params.min_damage_per_hit,
-                     float(np.linalg.norm(event.impulse)) * self.params.damage_per_impulse)
+                     float(exact.length(event.impulse)) * self.params.damage_per_impulse)
         target.hp = max(0.0, target.hp - damage)
         if target.hp == 0.0:
             self.destroyed = True

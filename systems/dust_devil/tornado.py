@@ -225,7 +225,7 @@ def lookup_nodes(dims: NDArray[np.intp], unit: F64, mode: str = "nearest") -> tu
     g *= dims - 1
     if mode == "nearest":
         np.rint(g, out=g)  # whole numbers: the flat index below is exact in float64
-        flat = g @ np.array([dims[1] * dims[2], dims[2], 1], dtype=np.float64)
+        flat = g[..., 0] * float(dims[1] * dims[2]) + g[..., 1] * float(dims[2]) + g[..., 2]
         return flat.astype(np.intp), None
     if mode != "trilinear":
         raise ValueError(f"unknown lookup mode {mode!r}; expected 'nearest' or 'trilinear'")

@@ -306,6 +306,46 @@ def _dense_operator(level: Level) -> NDArray[np.float64]:
     return matrix
 
 
+def _pseudo_inverse(matrix: NDArray[np.float64]) -> NDArray[np.float64]:
+    """pinv(M) of the coarsest level's operator with the same bits on every CPU.
+
+    ``np.linalg.pinv`` runs LAPACK's SVD through OpenBLAS, whose kernels are chosen by the CPU: its last bits
+    differed between ``OPENBLAS_CORETYPE`` settings on one machine. M is symmetric, each row's sum is its
+    open-boundary faces' coefficients (faces towards inactive cells are 0), and the connected groups of active
+    cells (faces > 0) that touch no open face have the constants on them as null space, the others none. With U
+    the orthonormal basis of those constants, pinv(M) = (M + U Uᵀ)⁻¹ − U Uᵀ; the inverse is Gauss–Jordan
+    elimination with partial pivoting in numpy's element-wise arithmetic (no BLAS, no fused multiply-adds).
+    """
+    n = matrix.shape[0]
+    group = list(range(n))  # union-find over the faces between active cells
+
+    def root(i: int) -> int:
+        while group[i] != i:
+            group[i] = group[group[i]]
+            i = group[i]
+        return i
+
+    for i, j in zip(*np.nonzero(np.triu(matrix, 1))):
+        group[root(int(i))] = root(int(j))
+    roots = np.array([root(i) for i in range(n)])
+    open_rows = matrix.sum(axis=1) > 1e-9 * np.abs(np.diagonal(matrix))
+    null = np.zeros((n, n))
+    for r in np.unique(roots):
+        members = roots == r
+        if not open_rows[members].any():
+            null[np.ix_(members, members)] = 1.0 / members.sum()
+    work = np.concatenate([matrix + null, np.eye(n)], axis=1)
+    for k in range(n):
+        pivot = k + int(np.argmax(np.abs(work[k:, k])))
+        if pivot != k:
+            work[[k, pivot]] = work[[pivot, k]]
+        work[k] = work[k] / work[k, k]
+        factors = work[:, k].copy()
+        factors[k] = 0.0
+        work -= factors[:, None] * work[k][None, :]
+    return work[:, n:] - null
+
+
 def build_hierarchy(solid: NDArray[np.bool_], open_faces: tuple[bool, ...]) -> PoissonHierarchy:
     """Levels from the fine solid mask down to :func:`components.toon_smoke.coarsest_shape` (≤ 64 cells unless a
     side turns odd or drops below 4 first; the config refuses grids whose coarsest level exceeds
@@ -319,7 +359,7 @@ def build_hierarchy(solid: NDArray[np.bool_], open_faces: tuple[bool, ...]) -> P
     if np.prod(level.shape) > MAX_COARSEST_CELLS:
         raise ValueError(f"grid {levels[0].shape} halves only down to {level.shape}: keep the sides within a factor "
                          "of 8 of each other")
-    level.dense_inverse = np.linalg.pinv(_dense_operator(level)) if level.active.any() else np.zeros((0, 0))
+    level.dense_inverse = _pseudo_inverse(_dense_operator(level)) if level.active.any() else np.zeros((0, 0))
     padded_index = np.arange(level.flat.x.size).reshape(level.flat.padded_shape)[1:-1, 1:-1, 1:-1]
     level.dense_cells = padded_index[level.active]  # C order, as the rows of the dense operator
     return PoissonHierarchy(levels, singular=not any(open_faces), fluid_weight=(~solid).astype(np.float32),

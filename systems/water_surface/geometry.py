@@ -109,7 +109,7 @@ def bilinear_fields(fields: tuple, uv: F64) -> list:
     c = np.minimum(np.maximum(uv, 0.0), (nx - 1, nz - 1))
     ij = np.minimum(c.astype(np.int64), (nx - 2, nz - 2))
     t = c - ij
-    flat = ij @ (1, nx)
+    flat = ij[..., 0] + ij[..., 1] * nx
     corners = flat[..., None] + (0, 1, nx, nx + 1)  # z00, z10, z01, z11
     tu, tv = t[..., 0:1], t[..., 1]
     out = []

@@ -1,5 +1,7 @@
 """Stable fluids on the MAC grid (seeds/002 §3.1): projection, advection, bounds, obstacles."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -623,3 +625,50 @@ def test_compiled_height_field_mask_keeps_cells_exactly_on_the_surface_out():
         got = simulate._solid_mask(centres, volume, cfg, colliders)
         assert np.array_equal(got, simulate._solid_mask_numpy(centres, volume, cfg, colliders))
         assert not got[:, row].any() and got[:, :row].all() and not got[:, row + 1:].any()
+
+
+_COARSE_INVERSE = """
+import hashlib, sys
+import numpy as np
+from systems.toon_smoke.poisson import build_hierarchy
+solid = np.zeros((16, 16, 16), bool)
+solid[:, :3, :] = True
+solid[5:8, 5:9, 4:7] = True
+for sides in [(True,) * 6, (False,) * 6, (False, False, False, True, False, False)]:
+    sys.stdout.write(hashlib.sha256(build_hierarchy(solid, sides).levels[-1].dense_inverse.tobytes()).hexdigest())
+"""
+
+
+def test_coarsest_inverse_has_the_same_bits_with_every_blas_kernel():
+    """LAPACK's SVD (np.linalg.pinv) gave other last bits with OpenBLAS's kernels for other CPUs; the coarsest
+    level's pseudo-inverse is computed without BLAS, so a puff's solve is the same on every machine."""
+    import os
+    import subprocess
+    import sys
+
+    digests = set()
+    for core in ("Prescott", "Sandybridge", "Haswell"):
+        env = dict(os.environ, OPENBLAS_CORETYPE=core)
+        digests.add(subprocess.run([sys.executable, "-c", _COARSE_INVERSE], env=env, capture_output=True, text=True,
+                                   check=True, cwd=Path(__file__).resolve().parents[3]).stdout)
+    assert len(digests) == 1
+
+
+@pytest.mark.parametrize("open_sides", [(True,) * 6, (False,) * 6, (False, False, False, True, False, False)])
+@pytest.mark.parametrize("split", [False, True])
+def test_coarsest_inverse_is_the_pseudo_inverse(open_sides, split):
+    """(M + U Uᵀ)⁻¹ − U Uᵀ with U the constants of each closed group of cells: the Moore–Penrose inverse, also when
+    a wall splits the box into two groups without an open face."""
+    from systems.toon_smoke.poisson import _dense_operator, build_hierarchy
+
+    solid = np.zeros((16, 16, 16), bool)
+    solid[:, :3, :] = True
+    if split:
+        solid[4:8, :, :] = True  # one whole coarsest cell thick: two groups there too
+    level = build_hierarchy(solid, open_sides).levels[-1]
+    m, inverse = _dense_operator(level), level.dense_inverse
+    if split:
+        assert not level.active.reshape(level.shape)[1].any() and level.active.sum() > 32
+    reference = np.linalg.pinv(m)
+    assert np.abs(inverse - reference).max() <= 1e-12 * np.abs(reference).max()
+    assert np.abs(m @ inverse @ m - m).max() <= 1e-12 * np.abs(m).max()
