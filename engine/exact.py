@@ -329,15 +329,6 @@ def _high_word(a: float) -> int:
 
 
 @kernel
-def _clear_low_word(x: float) -> float:
-    """x with the low 32 bits of its encoding 0 (fdlibm's ``__LO(x) = 0``): a normal x cut toward 0 to 21 bits."""
-    if abs(x) < 2.2250738585072014e-308:  # subnormal or 0: multiples of 2^-1042 are kept
-        return math.copysign(math.ldexp(float(int(math.ldexp(x, 1042))), -1042), x)
-    m, e = math.frexp(x)
-    return math.ldexp(float(int(m * 2097152.0)), e - 21)
-
-
-@kernel
 def _from_high_word(h: int) -> float:
     """The double whose upper 32 bits are h (0 ≤ h < 0x7ff00000) and lower 32 bits 0 (fdlibm's ``t = 0;
     __HI(t) = h``): the fraction's leading 20 bits with 1 before them, or without it for the exponent field 0."""
@@ -345,6 +336,12 @@ def _from_high_word(h: int) -> float:
     if e == 0:
         return math.ldexp(float(h), -1042)
     return math.ldexp(float((h & 0xFFFFF) | 0x100000), e - 1043)
+
+
+@kernel
+def _clear_low_word(x: float) -> float:
+    """x with the low 32 bits of its encoding 0 (fdlibm's ``__LO(x) = 0``): a normal x cut toward 0 to 21 bits."""
+    return math.copysign(_from_high_word(_high_word(abs(x))), x)
 
 
 @kernel
