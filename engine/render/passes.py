@@ -630,6 +630,19 @@ def present_execute(renderer: Renderer, pc, view: View, final_handle, first: boo
     fbo.viewport = (0, 0, renderer.width, renderer.height)
 
 
+def antialias_execute(renderer: Renderer, pc, ldr_handle, target_handle) -> None:
+    """FXAA (shaders/fxaa.frag) of a view's tone-mapped picture into a target of the same size."""
+    ldr = pc.get(ldr_handle)
+    fbo = renderer.framebuffer(pc.get(target_handle))
+    fbo.use()
+    fbo.viewport = (0, 0, *ldr.size)
+    renderer.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
+    vao = _fullscreen(renderer, "fxaa.frag")
+    ldr.use(0)
+    set_uniforms(vao.program, image=0, texel=(1.0 / ldr.size[0], 1.0 / ldr.size[1]))
+    vao.render(moderngl.TRIANGLES, vertices=3)
+
+
 # --------------------------------------------------------------------------- text
 def text_image(lines: list[str], size: int, color=(255, 255, 255), background=(0, 0, 0, 150), pad: int = 6):
     """RGBA PIL image of ``lines`` on a translucent box (Pillow's built-in font)."""

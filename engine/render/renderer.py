@@ -31,6 +31,8 @@ if TYPE_CHECKING:
 
 log = logging.getLogger("engine.render")
 SHADER_DIR = Path(__file__).parent / "shaders"
+# GL_RENDERER names of software rasterisers (lower case): antialiasing "auto" leaves FXAA off on them
+_SOFTWARE_RASTERISERS = ("llvmpipe", "softpipe", "swrast", "swiftshader", "software rasterizer")
 HDR_FORMAT = "rgba16f"  # every view's HDR colour target and its kept static layer (rgba32f: demo 49.4 -> 51.6 ms)
 
 
@@ -227,6 +229,8 @@ class Renderer:
         self.fold_color_layers = True  # a view's last colour layer is added in its tone map (_fold_layer)
         self._shader_generation = 0  # bumped by reload_shaders: kept pictures drawn with older shaders are stale
         self._final_fbo: moderngl.Framebuffer | None = None
+        renderer_name = str(ctx.info.get("GL_RENDERER", "")).lower()
+        self.software = any(name in renderer_name for name in _SOFTWARE_RASTERISERS)
         self._resize_final()
         from engine.render.passes import builtin_features
 
@@ -354,6 +358,12 @@ class Renderer:
             self._free_resource(self._final)
         self._final = self.ctx.texture((self.width, self.height), 4)
         self._final_fbo = self.framebuffer(self._final)
+
+    @property
+    def antialiasing(self) -> bool:
+        """Whether frames are anti-aliased (the render settings' ``antialiasing``; ``auto``: on a hardware GPU)."""
+        mode = self.settings.antialiasing
+        return (not self.software) if mode == "auto" else mode == "fxaa"
 
     @property
     def final_texture(self) -> moderngl.Texture:
@@ -625,9 +635,9 @@ class Renderer:
 
     def _presented_whole(self, view: View) -> bool:
         """Whether ``view`` is tone-mapped straight into the whole window image (one view at full scale, drawn
-        every frame): the case :meth:`_partial_present` serves."""
+        every frame, not anti-aliased): the case :meth:`_partial_present` serves."""
         return (view.extra.get("held") is None and view.extra["rect"] == (0, 0, self.width, self.height)
-                and (view.width, view.height) == (self.width, self.height))
+                and (view.width, view.height) == (self.width, self.height) and not self.antialiasing)
 
     def _partial_present(self, view: View) -> tuple[int, int, int, int] | None:
         """The rectangle of ``view`` (pixels: x, y, width, height; possibly empty) that its present has to tone-map
@@ -734,10 +744,22 @@ class Renderer:
             if layer is not None:
                 b.read(layer.texture)
 
+        antialiased = self.antialiasing
+
+        def tonemap_setup(b):
+            read_color(b)
+            out["ldr"] = out["tonemapped"] = b.write(b.create(f"{view.name}.ldr",
+                                                              TextureDesc(view.width, view.height, "rgba8")))
+
         if held is not None:  # tone-mapped into the kept picture when rendered; presented from it every frame
-            out["ldr"] = graph.import_resource(f"{view.name}.held", view.extra["held_texture"],
-                                               TextureDesc(view.width, view.height, "rgba8"))
-            if held == "rendered":
+            kept_picture = graph.import_resource(f"{view.name}.held", view.extra["held_texture"],
+                                                 TextureDesc(view.width, view.height, "rgba8"))
+            out["ldr"] = kept_picture
+            if held == "rendered" and antialiased:  # anti-aliased once, into the kept picture
+                graph.add_pass(f"tonemap.{view.name}", tonemap_setup,
+                               lambda pc: tonemap_execute(self, pc, view, out["tonemapped"], source=hdr, layer=layer))
+                out["ldr"] = self._declare_antialias(graph, view, out["ldr"], kept_picture)
+            elif held == "rendered":
                 def held_setup(b):
                     read_color(b)
                     out["ldr"] = b.write(out["ldr"])
@@ -745,13 +767,12 @@ class Renderer:
                 graph.add_pass(f"tonemap.{view.name}", held_setup,
                                lambda pc: tonemap_execute(self, pc, view, out["ldr"], source=hdr, layer=layer))
             source = None
-        elif (view.width, view.height) != (w, h):
-            def tonemap_setup(b):
-                read_color(b)
-                out["ldr"] = b.write(b.create(f"{view.name}.ldr", TextureDesc(view.width, view.height, "rgba8")))
-
+        elif (view.width, view.height) != (w, h) or antialiased:
+            # tone-mapped at the view's size, anti-aliased there (before any upscaling), then presented
             graph.add_pass(f"tonemap.{view.name}", tonemap_setup,
-                           lambda pc: tonemap_execute(self, pc, view, out["ldr"], source=hdr, layer=layer))
+                           lambda pc: tonemap_execute(self, pc, view, out["tonemapped"], source=hdr, layer=layer))
+            if antialiased:
+                out["ldr"] = self._declare_antialias(graph, view, out["ldr"])
             source = None
 
         region = self._partial_present(view) if source is not None else None
@@ -776,6 +797,22 @@ class Renderer:
                                                   kept=None if kept_ldr is None else (kept_ldr, region),
                                                   layer=layer if source is not None else None, source=hdr))
         return out["final"]
+
+    def _declare_antialias(self, graph, view: View, ldr, target=None):
+        """FXAA (shaders/fxaa.frag) of ``view``'s tone-mapped picture ``ldr`` into ``target`` (a handle; None: a new
+        8-bit target of the view's size); returns the handle written."""
+        from engine.render.passes import antialias_execute
+
+        out = {}
+
+        def setup(b):
+            b.read(ldr)
+            made = target if target is not None else b.create(f"{view.name}.aa",
+                                                               TextureDesc(view.width, view.height, "rgba8"))
+            out["aa"] = b.write(made)
+
+        graph.add_pass(f"antialias.{view.name}", setup, lambda pc: antialias_execute(self, pc, ldr, out["aa"]))
+        return out["aa"]
 
     def static_depth_key(self, view: View) -> Hashable | None:
         """The kept static layer's key when ``view``'s depth is, at this point of the frame's declaration, that
