@@ -68,7 +68,7 @@ def main(width: int = 1280, height: int = 720, warmup: int = 30, frames: int = 6
         app.render_frame(overlap=tick)
         ctx.finish()
         overlapped.append((time.perf_counter() - t) * 1e3)
-    print(f"demo at {width}x{height} (render_scale {app.config.render.render_scale}), {frames} frames after "
+    print(f"demo at {width}x{height} (render_scale {app.renderer.render_scale}), {frames} frames after "
           f"warm-up, one fixed tick per frame:")
 
     def row(name: str, values: list[float]) -> str:

@@ -64,6 +64,10 @@ class RenderSettings(ConfigModel):
                             "rasteriser, where the pass costs about half a 30 fps frame (18 ms for the demo's "
                             "640 x 360 view on llvmpipe, 2 cores). It runs on each view at the view's own size, "
                             "before upscaling (render_scale).")
+    software_render_scale: float | None = Field(
+        None, ge=0.25, le=1.0, description="render_scale on a software rasteriser (llvmpipe, where the fill rate is "
+                                           "the limit), so that a scene draws at full size on a GPU and at a "
+                                           "fraction on the CPU. Unset: render_scale everywhere.")
     overlap_ticks: bool = Field(True, description="In a window, run each frame's simulation ticks while the GPU "
                                                   "draws the previous state (one frame more latency; a software "
                                                   "rasteriser then draws on its threads while Python simulates). "

@@ -360,6 +360,13 @@ class Renderer:
         self._final_fbo = self.framebuffer(self._final)
 
     @property
+    def render_scale(self) -> float:
+        """The fraction of their window size the views render at: the render settings' ``render_scale``, or
+        ``software_render_scale`` on a software rasteriser when the scene sets one."""
+        software_scale = self.settings.software_render_scale
+        return software_scale if self.software and software_scale is not None else self.settings.render_scale
+
+    @property
     def antialiasing(self) -> bool:
         """Whether frames are anti-aliased (the render settings' ``antialiasing``; ``auto``: on a hardware GPU)."""
         mode = self.settings.antialiasing
@@ -391,7 +398,7 @@ class Renderer:
         rect = viewport_pixels(cfg.viewport, (self.width, self.height))
         proj = projection(cfg, rect[2], rect[3])
         fov = float(np.radians(cfg.fov)) if cfg.projection == "perspective" else 0.0
-        scale = self.settings.render_scale  # views render at this fraction of their window size; present upscales
+        scale = self.render_scale  # views render at this fraction of their window size; present upscales
         width, height = max(1, int(round(rect[2] * scale))), max(1, int(round(rect[3] * scale)))
         v = View(name, width, height, view.astype(np.float32), proj.astype(np.float32), np.asarray(pos, np.float32),
                  np.asarray(fwd, np.float32), cfg.near, cfg.far, fov, cfg.projection == "orthographic",

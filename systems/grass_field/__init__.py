@@ -50,9 +50,10 @@ def check_level_zero_load(plan, text: str) -> list:
             if cname != "GrassField":
                 continue
             worst = None
+            scale = max(render.render_scale, render.software_render_scale or 0.0)  # the larger: the worse case
             for name, cam in views:
-                width = render.width * render.render_scale * cam.viewport[2]
-                height = render.height * render.render_scale * cam.viewport[3]
+                width = render.width * scale * cam.viewport[2]
+                height = render.height * scale * cam.viewport[3]
                 tan_x = math.tan(math.radians(cam.fov) / 2.0) * width / max(height, 1.0)
                 d0 = width * cfg.length_of_interest / (2.0 * tan_x * cfg.level_thresholds[0])
                 view = min(1.0, 2.0 * 2.0 * math.atan(tan_x) / (2.0 * math.pi))  # culling keeps twice the angle

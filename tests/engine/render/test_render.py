@@ -130,6 +130,23 @@ def test_render_scale_tone_maps_at_view_size_then_upscales():
     assert np.abs(images[1.0] - images[0.5]).mean() < 3.0  # 0.8 measured; an untoned or unscaled view is far off
 
 
+def test_software_render_scale_applies_on_a_software_rasteriser_only():
+    app = App(SCENE)
+    app.config.render.software_render_scale = 0.5
+    renderer = make_renderer(app, 160, 96)
+    try:
+        for software, size in ((True, (80, 48)), (False, (160, 96)), (True, (80, 48))):
+            renderer.software = software
+            app.render_frame()
+            assert (renderer.views[0].width, renderer.views[0].height) == size
+        app.config.render.software_render_scale = None  # unset: render_scale everywhere
+        app.render_frame()
+        assert (renderer.views[0].width, renderer.views[0].height) == (160, 96)
+    finally:
+        renderer.release()
+        app.renderer = None
+
+
 def test_hud_reuses_its_vertex_array_and_refreshes_the_fps_text_four_times_a_second(monkeypatch):
     from engine.render import passes
 
