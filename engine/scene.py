@@ -83,11 +83,11 @@ class RenderSettings(ConfigModel):
     sun_color: Vec3 = Field((1.0, 0.95, 0.85), description="Sun colour and intensity.")
     ambient: float = Field(0.35, ge=0.0, le=4.0, description="Ambient light intensity.")
     fog_density: float = Field(0.004, ge=0.0, le=1.0, description="Exponential distance fog per metre.")
-    vsync: bool = True
+    vsync: bool = Field(True, description="In a window, wait for the display's refresh between frames.")
 
 
 class SceneSettings(ConfigModel):
-    name: str = Field("untitled", max_length=128)
+    name: str = Field("untitled", max_length=128, description="Shown in the window's title.")
     seed: int = Field(0, ge=0, le=2**63 - 1, description="Root seed of every random stream.")
     fixed_dt: float = Field(1.0 / 60.0, ge=1.0 / 1000.0, le=0.1, description="Fixed simulation step in seconds.")
     max_catchup_steps: int = Field(5, ge=1, le=32, description="Cap on fixed steps run for one slow frame.")
