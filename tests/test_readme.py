@@ -19,7 +19,7 @@ def test_the_headless_testing_example_passes(monkeypatch):
     namespace: dict = {"__name__": "readme_example"}
     exec(compile(_section_code("Testing a game headless"), "README.md", "exec"), namespace)
     tests = [f for name, f in namespace.items() if name.startswith("test_") and callable(f)]
-    assert len(tests) == 2
+    assert len(tests) == 3
     for test in tests:
         test()
     assert os.getcwd() == str(ROOT)

@@ -44,6 +44,10 @@ def create_headless_context() -> moderngl.Context:
 
 def headless_renderer(app: App, width: int | None = None, height: int | None = None,
                       ctx: moderngl.Context | None = None) -> Renderer:
+    """A renderer for ``app`` drawing offscreen: ``app.render_frame()`` draws a frame, ``read_image()`` returns it
+    as a PIL image and ``save_screenshot(path)`` writes it; ``release()`` frees its GL objects.  The size defaults
+    to the scene's ``[render]`` width and height; ``ctx``: a context to share (tests make one per session, see
+    :func:`create_headless_context`), else a new EGL one."""
     s = app.config.render
     return Renderer(app, ctx or create_headless_context(), width or s.width, height or s.height)
 
