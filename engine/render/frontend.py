@@ -170,7 +170,7 @@ def _run_window(app: App, size, steps, every, last, profile: bool) -> None:
         return True
 
     pyglet.app.run(interval=0)
-    if last:
+    if last and renderer.frame_index:  # (a window closed before its first frame has nothing to write)
         renderer.save_screenshot(last)
     if profile:
         print(renderer.timer.report())

@@ -859,9 +859,12 @@ class Renderer:
 
     # ----------------------------------------------------------------- pictures
     def read_image(self):
-        """The last frame as a PIL image (top row first)."""
+        """The last frame as a PIL image (top row first).  Before the first frame there is none: RuntimeError
+        (the window image would read as black)."""
         from PIL import Image
 
+        if self.frame_index == 0:
+            raise RuntimeError("no frame drawn yet: call app.render_frame() (or renderer.render(world)) first")
         raw = self._final_fbo.read(components=4)
         img = Image.frombytes("RGBA", (self.width, self.height), raw).transpose(Image.FLIP_TOP_BOTTOM)
         return img.convert("RGB")

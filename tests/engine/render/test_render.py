@@ -389,3 +389,18 @@ def test_reset_frame_clock_keeps_frames_drawn_far_apart_out_of_the_frame_rate():
     assert renderer.fps > 0.0
     renderer.release()
     app.renderer = None
+
+
+def test_reading_the_image_before_the_first_frame_is_an_error_not_a_black_picture():
+    import pytest
+
+    app = App(SCENE)
+    renderer = make_renderer(app, 32, 20)
+    try:
+        with pytest.raises(RuntimeError, match="no frame drawn yet"):
+            renderer.read_image()
+        app.render_frame()
+        assert renderer.read_image().size == (32, 20)
+    finally:
+        renderer.release()
+        app.renderer = None
