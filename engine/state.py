@@ -157,23 +157,34 @@ class Snapshot:
 
     data: dict[str, Any]
     tick: int
+    # the cursors of the event readers that the copy does not hold (non-state resources, closures), weakly
+    reader_cursors: list[tuple[Any, int]] = dataclasses.field(default_factory=list)
 
 
 def snapshot(world: World) -> Snapshot:
-    """Copy all of ``world``'s state (resources that are not state are shared, not copied)."""
+    """Copy all of ``world``'s state (resources that are not state are shared, not copied; the cursors of the
+    event readers among them are kept, see :class:`engine.events.EventReader`)."""
     memo = _shared_memo(world)
     data = {name: copy.deepcopy(getattr(world, name), memo) for name in _SNAPSHOT_FIELDS}
     data["commands_queue"] = copy.deepcopy(world.commands._queue, memo)
-    return Snapshot(data, world.tick)
+    return Snapshot(data, world.tick, world.events.reader_cursors())
 
 
 def restore(world: World, snap: Snapshot) -> None:
-    """Put ``world`` back into the state of ``snap`` (the snapshot stays reusable)."""
+    """Put ``world`` back into the state of ``snap`` (the snapshot stays reusable).
+
+    ``world.events`` stays the same object, its stream replaced by the snapshot's: readers kept outside the
+    state (a non-state resource, a closure) keep reading the world's events, from their cursors at the
+    snapshot; readers inside the state (script slots, state resources) come back as copies reading it too."""
     memo = _shared_memo(world)
     live = {t: r for t, r in world._resources.items() if t not in world._state_resources}
+    stream = copy.deepcopy(snap.data["events"], memo)  # first: an event also held by the state stays one object
+    memo[id(snap.data["events"])] = world.events  # copied readers refer to the live events, not to a copy
     data = copy.deepcopy(snap.data, memo)
     for name in _SNAPSHOT_FIELDS:
-        setattr(world, name, data[name])
+        if name != "events":
+            setattr(world, name, data[name])
+    world.events.load(stream, snap.reader_cursors)
     world._resources.update({t: r for t, r in live.items() if t not in world._state_resources})
     world.commands._queue = data["commands_queue"]
     world._query_cache.clear()
