@@ -22,7 +22,7 @@ from typing import Any
 from engine.builtin import InputSource
 from engine.config import ConfigError, Problem
 from engine.input import InputQueue, InputState, KeySet
-from engine.registry import Registry, RegistryError, default_registry
+from engine.registry import Registry, available_plugins, default_registry
 from engine.scene import SceneConfig, ScenePlan, plan_scene, read_scene, spawn_plan
 from engine.schedule import FRAME_STAGES, TICK_STAGES, FixedClock, Stage
 from engine.script import ScriptRuntime
@@ -89,11 +89,14 @@ class App:
             raise
 
     def _registry_for(self, settings: SceneConfig) -> Registry:
-        try:
-            return default_registry(settings.scene.plugins)
-        except RegistryError as exc:  # an unknown name in [scene] plugins
-            raise ConfigError([Problem(str(self.scene_path or "<scene>"), "scene.plugins", str(exc),
-                                       settings.scene.plugins)]) from None
+        """The registry of the plugins the scene names (all installed ones when it names none).  A name that no
+        installed package declares is left out here and reported by plan_scene, with the file, the key and the
+        nearest name, as it is when App is given a registry, and together with the scene's other problems."""
+        names = settings.scene.plugins
+        if names is not None:
+            available = set(available_plugins())
+            names = [name for name in names if name in available]
+        return default_registry(names)
 
     def _new_world(self) -> World:
         world = World(self.seed)

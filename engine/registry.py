@@ -181,6 +181,21 @@ class Registry:
         plugin.build(self)
         self.plugins.append(plugin.name)
 
+    def plugin_error(self, name: str) -> RegistryError | None:
+        """Why a plugin a scene names (``[scene] plugins``) is missing from this registry; None when it is
+        installed here.  A name no installed package declares is unknown (with the nearest name); a plugin that
+        exists but was not installed here is named as such, since the scene's components and scripts from it
+        would be unknown."""
+        if name in self.plugins:
+            return None
+        available = available_plugins()
+        if name not in available:
+            return _unknown("plugin", name, set(available) | set(self.plugins))
+        problem = f"plugin '{name}' is not installed in this registry"
+        return RegistryError(f"{problem} (installed: {', '.join(self.plugins) or 'none'}); a registry given to App "
+                             "must install every plugin the scene names (registry.install), or leave registry= out "
+                             "and App builds it from [scene] plugins", problem)
+
 
 def _unknown(kind: str, name: str, known: Iterable[str]) -> RegistryError:
     close = suggest(name, known)
@@ -192,6 +207,11 @@ def _unknown(kind: str, name: str, known: Iterable[str]) -> RegistryError:
                f"found through the '{ENTRY_POINT_GROUP}' entry points of an installed package (docs/modding.md, "
                "section 3)")
     return RegistryError(f"{problem}{hint} (registered: {', '.join(sorted(known)) or 'none'}){how}", problem, close)
+
+
+def available_plugins() -> list[str]:
+    """The names of the plugins that installed packages declare (``ecsfx.plugins`` entry points), sorted."""
+    return sorted(ep.name for ep in metadata.entry_points(group=ENTRY_POINT_GROUP))
 
 
 def discover_plugins(names: Iterable[str] | None = None) -> list[Plugin]:

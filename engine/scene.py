@@ -160,6 +160,7 @@ def plan_scene(path: str | Path, registry: Registry, configs_root: Path | None =
     settings = config.scene if config is not None else _valid_or_none(SceneSettings, data.get("scene", {}))
     if settings is not None:
         context["fixed_dt"] = settings.fixed_dt
+        problems.extend(plugin_problems(path, registry, settings.plugins, text))
     files = [path]
     raw_entities = data.get("entities", [])
     entities = []
@@ -175,6 +176,17 @@ def plan_scene(path: str | Path, registry: Registry, configs_root: Path | None =
     plan = ScenePlan(path, root, config, entities, files)
     plan.warnings = scene_warnings(registry, plan, text)
     return plan
+
+
+def plugin_problems(path: Path, registry: Registry, names: list[str] | None, text: str) -> list[Problem]:
+    """``[scene] plugins`` against the registry the scene is loaded with: every name must be a plugin installed
+    there, whether App built the registry from this list or was given one (``App(..., registry=...)``)."""
+    problems = []
+    for name in names or ():
+        error = registry.plugin_error(name)
+        if error is not None:
+            problems.append(Problem(str(path), "scene.plugins", str(error), line=locate_line(text, ("scene", "plugins"))))
+    return problems
 
 
 def scene_budget_problems(path: Path, config: SceneConfig, entities: list[EntityPlan]) -> list[Problem]:

@@ -226,6 +226,31 @@ def test_unknown_plugin_in_scene_names_the_key(tmp_path):
     assert p.key == "scene.plugins" and "did you mean 'water_surface'" in p.message
 
 
+@pytest.mark.parametrize("given", ["none", "default", "core only"])
+def test_an_unknown_plugin_in_the_scene_is_an_error_whatever_registry_app_is_given(tmp_path, given):
+    """[scene] plugins names a plugin no package declares: a ConfigError naming the file, the key, its line and
+    the near miss, with App's own registry or one passed in (was: silently ignored when registry= was given)."""
+    path = scene(configs(tmp_path), '[scene]\nname = "x"\nplugins = ["nonexistent_plugin", "water_surfce"]\n')
+    registry = {"none": None, "default": default_registry(), "core only": default_registry([])}[given]
+    with pytest.raises(ConfigError) as err:
+        App(path, registry=registry)
+    unknown, near = err.value.problems
+    assert (unknown.file, unknown.key, unknown.line) == (str(path), "scene.plugins", 3)
+    assert "unknown plugin 'nonexistent_plugin'" in unknown.message and "render" in unknown.message
+    assert near.key == "scene.plugins" and "did you mean 'water_surface'" in near.message
+
+
+def test_a_scene_plugin_missing_from_the_registry_app_is_given_is_named(tmp_path):
+    """A plugin that exists but is not installed in the registry passed to App: its components would be unknown,
+    so the scene's plugins entry says why (and every problem is reported at once)."""
+    path = scene(configs(tmp_path), '[scene]\nplugins = ["render", "dust_devil"]\n')
+    with pytest.raises(ConfigError) as err:
+        App(path, registry=default_registry(["render"]))
+    (p,) = err.value.problems
+    assert p.key == "scene.plugins" and "plugin 'dust_devil' is not installed in this registry" in p.message
+    assert App(path, registry=default_registry(["render", "dust_devil"])).registry.plugins[-1] == "dust_devil"
+
+
 def test_gallery_bad_arguments_fail_before_rendering(tmp_path, capsys):
     root = configs(tmp_path)
     code, text = cli(capsys, "gallery", "--configs", str(tmp_path / "nowhere"), "--out", str(tmp_path / "g"))
