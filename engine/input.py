@@ -12,15 +12,101 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Iterator
 
+from engine.config import suggest
+
+KINDS = ("key_down", "key_up", "mouse_move", "button_down", "button_up", "scroll")
+_KEY_KINDS = ("key_down", "key_up")
+_BUTTON_KINDS = ("button_down", "button_up")
+
+# The key names the window produces (engine/render/frontend.py key_name: pyglet's key symbol names, lower case,
+# digits without pyglet's leading underscore, left and right shift and ctrl as one key each).
+_NAMED_KEYS = (
+    "space enter tab escape backspace delete insert home end pageup pagedown left right up down shift ctrl lalt ralt "
+    "lcommand rcommand lmeta rmeta loption roption lwindows rwindows menu capslock numlock scrolllock pause break "
+    "print sysreq clear linefeed begin select execute find help cancel undo redo scriptswitch "
+    "minus equal plus comma period slash backslash semicolon colon apostrophe doublequote quoteleft asciitilde "
+    "asciicircum bracketleft bracketright braceleft braceright parenleft parenright less greater bar ampersand "
+    "asterisk at dollar exclamation percent pound question underscore "
+    "num_add num_subtract num_multiply num_divide num_decimal num_separator num_equal num_enter num_space num_tab "
+    "num_begin num_delete num_insert num_home num_end num_page_up num_page_down num_left num_right num_up num_down "
+    "num_f1 num_f2 num_f3 num_f4").split()
+KEY_NAMES = frozenset([*"abcdefghijklmnopqrstuvwxyz", *"0123456789", *(f"f{i}" for i in range(1, 25)),
+                       *(f"num_{i}" for i in range(10)), *_NAMED_KEYS])
+# other spellings of the same keys (pyglet's aliases, and the sides the window folds into one key)
+KEY_ALIASES = {"return": "enter", "lshift": "shift", "rshift": "shift", "lctrl": "ctrl", "rctrl": "ctrl",
+               "hash": "pound", "grave": "quoteleft", "modeswitch": "scriptswitch", "num_prior": "num_page_up",
+               "num_next": "num_page_down"}
+BUTTON_NAMES = ("left", "right", "middle")
+
+
+def key_name(name: str) -> str:
+    """The engine's name of a key, from any spelling the window's toolkit uses: case-insensitive ("A" is "a",
+    "Left" the left arrow "left", "ESCAPE" "escape"), pyglet's symbol names ("_1" is "1", "RETURN" "enter",
+    "LSHIFT" "shift").  A name that is no key raises ``ValueError`` with the near miss and the valid names."""
+    text = str(name).lower()
+    if text.startswith("_") and text[1:].isdigit():
+        text = text[1:]
+    text = KEY_ALIASES.get(text, text)
+    if text in KEY_NAMES or text.isdigit() or text.startswith("user_key("):  # the last two: keys pyglet cannot name
+        return text
+    close = suggest(text, KEY_NAMES | KEY_ALIASES.keys())
+    hint = f"; did you mean '{KEY_ALIASES.get(close, close)}'?" if close else ""
+    raise ValueError(f"unknown key name {name!r}{hint} (key names, case-insensitive: a-z, 0-9, f1-f24, "
+                     f"num_0-num_9, {', '.join(_NAMED_KEYS)})")
+
+
+def button_name(name: str) -> str:
+    """The engine's name of a mouse button: "left", "right", "middle" (any case), or the number pyglet gives an
+    extra button ("8")."""
+    text = str(name).lower()
+    if text in BUTTON_NAMES or text.isdigit():
+        return text
+    close = suggest(text, BUTTON_NAMES)
+    hint = f"; did you mean '{close}'?" if close else ""
+    raise ValueError(f"unknown mouse button {name!r}{hint} (buttons: {', '.join(BUTTON_NAMES)}, or a number)")
+
 
 @dataclass(frozen=True)
 class InputEvent:
-    kind: str  # key_down, key_up, mouse_move, button_down, button_up, scroll
+    """One platform event, as the window sends it and as tests, autopilots and replays inject it.
+
+    ``kind`` is one of ``key_down``, ``key_up``, ``mouse_move``, ``button_down``, ``button_up``, ``scroll``;
+    anything else raises ``ValueError`` naming the kinds (and the near miss: "keydown" -> "key_down").
+
+    ``key`` names the key of ``key_down``/``key_up`` and the button of ``button_down``/``button_up``, spelled as
+    the window spells it: lower case, "w", "1", "space", "enter", "escape", "tab", "shift", "ctrl", "left",
+    "f1", "num_0" ... (:data:`KEY_NAMES`); buttons "left", "right", "middle".  Other spellings of a key are
+    normalised to that name, case-insensitively ("A" -> "a", "Left" -> "left", "Escape" -> "escape",
+    "RETURN" -> "enter", "LSHIFT" -> "shift"), so ``event.key`` is what ``InputState.is_down`` is asked with;
+    a name that is no key ("esc", "keyA") raises ``ValueError`` with the near miss and the valid names.
+    ``mouse_move`` and ``scroll`` take no key (``x``, ``y``: the pointer; ``dx``, ``dy``: the motion or the
+    scroll amount in ``dy``).
+    """
+
+    kind: str
     key: str = ""
     x: float = 0.0
     y: float = 0.0
     dx: float = 0.0
     dy: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.kind not in KINDS:
+            close = suggest(str(self.kind).lower().replace("-", "_"), KINDS)
+            hint = f"; did you mean '{close}'?" if close else ""
+            raise ValueError(f"unknown input event kind {self.kind!r}{hint} (kinds: {', '.join(KINDS)})")
+        if self.kind in _KEY_KINDS + _BUTTON_KINDS:
+            if not self.key:
+                what = "key" if self.kind in _KEY_KINDS else "button"
+                raise ValueError(f"a {self.kind} event needs a {what}: InputEvent({self.kind!r}, {what} name)")
+            try:
+                name = key_name(self.key) if self.kind in _KEY_KINDS else button_name(self.key)
+            except ValueError as exc:
+                raise ValueError(f"{self.kind} event: {exc}") from None
+            object.__setattr__(self, "key", name)
+        elif self.key:
+            raise ValueError(f"a {self.kind} event takes no key (got {self.key!r}): keys go with key_down/key_up, "
+                             "buttons with button_down/button_up")
 
     def to_json(self) -> dict[str, Any]:
         return {k: v for k, v in asdict(self).items() if v not in ("", 0.0)} | {"kind": self.kind}

@@ -230,9 +230,9 @@ def test_this_ticks_presses_iterate_in_the_same_order_in_every_process():
     iterate in the order the keys went down, not in a set's order (which follows the process's hash seed)."""
     code = ("from engine.input import InputEvent, InputState\n"
             "s = InputState()\n"
-            "s.apply([InputEvent('key_down', k) for k in ('3', 'space', 'w', '1', 'mouse')])\n"
+            "s.apply([InputEvent('key_down', k) for k in ('3', 'space', 'w', '1', 'm')])\n"
             "s.apply([InputEvent('key_up', k) for k in ('w', '1', 'space')] + [InputEvent('key_down', 'q')])\n"
             "print(list(s.keys_down), list(s.pressed), list(s.released))")
     seen = {subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                            env={**os.environ, "PYTHONHASHSEED": str(seed)}).stdout for seed in range(1, 7)}
-    assert seen == {"['3', 'mouse', 'q'] ['q'] ['w', '1', 'space']\n"}
+    assert seen == {"['3', 'm', 'q'] ['q'] ['w', '1', 'space']\n"}
