@@ -239,12 +239,27 @@ def _setup_world(world: World) -> None:
     world.despawn_hooks.append(lambda w, e: w.random.drop(e))
 
 
-def _pause(world: World, entity: int, paused: bool | None = None) -> bool:
-    """``ctx.call("engine.pause")`` toggles (or sets) the pause; returns the new state."""
+def _pause(world: World, entity: int, paused: bool = True) -> bool:
+    """``ctx.call("engine.pause")`` pauses the game (calling it again keeps it paused);
+    ``ctx.call("engine.pause", paused=False)`` resumes it.  Returns the new state.  A pause key toggles with
+    ``engine.toggle_pause``."""
+    from engine.app import TimeControl
+
+    if not isinstance(paused, (bool, np.bool_)):
+        raise TypeError(f"command 'engine.pause': paused must be True or False, got {paused!r} (engine.pause "
+                        "pauses, paused=False resumes; to toggle, call 'engine.toggle_pause')")
+    control = world.resource(TimeControl)
+    control.paused = bool(paused)
+    return control.paused
+
+
+def _toggle_pause(world: World, entity: int) -> bool:
+    """``ctx.call("engine.toggle_pause")`` pauses a running game and resumes a paused one (the pause key);
+    returns the new state."""
     from engine.app import TimeControl
 
     control = world.resource(TimeControl)
-    control.paused = (not control.paused) if paused is None else bool(paused)
+    control.paused = not control.paused
     return control.paused
 
 
@@ -266,6 +281,7 @@ class CorePlugin:
         registry.add_system(run_scripts, Stage.SCRIPT, name="core.scripts")
         registry.on_world(_setup_world)
         registry.add_command("engine.pause", _pause)
+        registry.add_command("engine.toggle_pause", _toggle_pause)
         registry.add_command("engine.restart", _restart)
         from engine import stock_scripts
 

@@ -44,7 +44,7 @@ class GameRules(Script):
         if inp.was_pressed("f1"):
             self.ctx.call("render.hud", show_help=not self.ctx.resource(Hud).show_help)
         if inp.was_pressed("escape") and state.phase == "playing":
-            state.paused = self.ctx.call("engine.pause")
+            state.paused = self.ctx.call("engine.toggle_pause")
         targets = len(self.ctx.query(Target))
         state.targets_left = targets
         state.targets_total = max(state.targets_total, targets)

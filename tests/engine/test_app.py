@@ -34,6 +34,26 @@ def test_pause_skips_simulation_and_the_stock_scripts_wait():
         app.schedule._sorted = None
 
 
+def test_engine_pause_pauses_and_the_pause_key_toggles():
+    """engine.pause pauses, so a rules script calling it twice (say, on two ways of losing in one tick) stays
+    paused (was: it toggled without paused=, and the second call resumed the game); paused=False resumes;
+    engine.toggle_pause is the pause key's toggle."""
+    import pytest
+
+    from engine.script import ScriptContext
+
+    app = App(SCENE)
+    ctx = ScriptContext(app.world, app.world.spawn(), "test")
+    control = app.world.resource(TimeControl)
+    assert ctx.call("engine.pause") is True and ctx.call("engine.pause") is True and control.paused
+    assert ctx.call("engine.pause", paused=False) is False and not control.paused
+    assert ctx.call("engine.toggle_pause") is True and control.paused
+    assert ctx.call("engine.toggle_pause") is False and not control.paused
+    with pytest.raises(TypeError, match="to toggle, call 'engine.toggle_pause'"):
+        ctx.call("engine.pause", paused=None)
+    assert not control.paused
+
+
 def test_restart_rebuilds_the_scene_with_the_same_seed():
     app = App(SCENE, seed=4)
     fresh = App(SCENE, seed=4)
