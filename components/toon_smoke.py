@@ -133,7 +133,8 @@ class ToonSmokeVolumeConfig(ConfigModel):
                                    description="Radius of the volume's own sphere obstacle, metres (0 = none).")
     obstacle_center: Vec3 = Field((0.0, 0.0, 0.0), description="Centre of the sphere obstacle, local metres.")
     obstacle_color: Color3 = Field((0.85, 0.12, 0.1), description="Colour the sphere obstacle is drawn with (as shown on screen).")
-    collide_with_colliders: bool = Field(True, description="Other entities' Colliders inside the volume are solid.")
+    collide_with_colliders: bool = Field(True, description="Other entities' Colliders inside the volume are solid "
+                                                           "(a height field: below its surface over its footprint).")
     # --- particles and density blobs (§3.3, figure 2)
     particle_count: int = Field(1000, ge=0, le=100_000, description="Number of particles; paper: 1000.")
     particle_spawn: Literal["volume", "sources"] = Field(

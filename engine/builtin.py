@@ -81,7 +81,9 @@ class TransformConfig(ConfigModel):
 class ColliderConfig(ConfigModel):
     """A collision shape queried by effects (energy-wave hits, water bodies, dust particles)."""
 
-    shape: Literal["box", "sphere", "plane"] = Field("box", description="Shape kind (height fields come from Terrain).")
+    shape: Literal["box", "sphere", "plane"] = Field(
+        "box", description="Shape kind (height fields come from Terrain and WaterSurface: solid below their surface "
+                           "over their footprint only, nothing beside it however low).")
     half_extents: HalfExtents3 = Field((0.5, 0.5, 0.5),
                                        description="Box half sizes in local units; each in [0, 10000].")
     radius: float = Field(0.5, gt=0.0, le=10000.0, description="Sphere radius in local units.")

@@ -61,8 +61,10 @@ class Collider:
 
     box: centred cube with ``half_extents``; sphere: ``radius`` about the origin; plane: the half-space below
     ``dot(normal, p) = offset`` (the plane passes through the origin when offset = 0; normal default +Y);
-    heightfield: everything below ``heightfield`` (distance measured vertically). ``layer`` names the collision
-    layer, ``is_trigger`` marks a volume that reports overlaps without being solid.
+    heightfield: the column below ``heightfield``'s surface over its footprint, a finite solid as in Bullet and
+    PhysX (distance measured vertically over the footprint; beside it a point is outside, however low: see
+    :meth:`HeightField.solid_distance`). ``layer`` names the collision layer, ``is_trigger`` marks a volume that
+    reports overlaps without being solid.
     """
 
     shape: ColliderShape = "box"
@@ -95,7 +97,8 @@ class Collider:
     # ----------------------------------------------------------------------------------------------- queries
 
     def signed_distance(self, points: ArrayLike, transform: Transform) -> F64:
-        """Signed distance (N,) from world points to the surface, negative inside (vertical for height fields)."""
+        """Signed distance (N,) from world points to the surface, negative inside (vertical over a height field's
+        footprint, to the column's border beside it)."""
         if self.shape == "box":
             return self._box_kernel_query(_points(points, "points"), transform)[0]
         return self._local_signed_distance(self._to_local(_points(points, "points"), transform), transform)
@@ -104,7 +107,8 @@ class Collider:
         """Penetration depth z = max(0, -signed distance) (N,) and outward unit surface normal (N, 3), world space.
 
         The normal is that of the nearest surface point (box, sphere, plane) or of the height field at the
-        point's (x, z); it is returned for every point, penetrating or not.
+        point's (x, z) over its footprint (beside it, from the column's point straight across the border to the
+        point, as a box's outside normal); it is returned for every point, penetrating or not.
         """
         if self.shape == "box":
             _, depth, normal = self._box_kernel_query(_points(points, "points"), transform)
@@ -212,19 +216,20 @@ class Collider:
             return np.linalg.norm(p, axis=-1) - self._sphere_radius(transform)
         if self.shape == "plane":
             return dot(p, self.normal) - self.offset
-        return self._heightfield_gap(p)
+        return self._heightfield_distance(p)
 
-    def _heightfield_gap(self, p: F64) -> F64:
-        """y − h(x, z) of local points p: compiled (:func:`_heightfield_gap_kernel`, the same bits) for float64
-        heights without NaN x or z; otherwise by HeightField.height_at, the numpy reference, as it always was (its
-        indexing fails on NaN)."""
+    def _heightfield_distance(self, p: F64) -> F64:
+        """HeightField.solid_distance of local points p (y − h(x, z) over the footprint, positive beside it):
+        compiled (:func:`_heightfield_distance_kernel`, the same bits) for float64 heights without NaN x or z;
+        otherwise by HeightField.solid_distance, the numpy reference (its indexing fails on NaN)."""
         field_ = self.heightfield
         if field_.heights.dtype == np.float64:
-            gap, done = _heightfield_gap_kernel(np.ascontiguousarray(p), np.ascontiguousarray(field_.heights),
-                                                float(field_.origin[0]), float(field_.origin[1]), float(field_.spacing))
+            distance, done = _heightfield_distance_kernel(
+                np.ascontiguousarray(p), np.ascontiguousarray(field_.heights), float(field_.origin[0]),
+                float(field_.origin[1]), float(field_.spacing))
             if done:
-                return gap
-        return p[:, 1] - field_.height_at(p[:, 0], p[:, 2])
+                return distance
+        return field_.solid_distance(p[:, 0], p[:, 1], p[:, 2])
 
     def _local_normal(self, p: F64, transform: Transform) -> F64:
         """The normal of :meth:`_local_distance` alone."""
@@ -234,7 +239,21 @@ class Collider:
             return _unit(p, _UP)
         if self.shape == "plane":
             return np.broadcast_to(self.normal, p.shape).copy()
-        return self.heightfield.normal_at(p[:, 0], p[:, 2])
+        return self._heightfield_normal(p)
+
+    def _heightfield_normal(self, p: F64) -> F64:
+        """The surface normal at (x, z) over the footprint; beside it the unit vector from the column's point
+        straight across the border (clip(x), min(y, h), clip(z)) to p, that of :meth:`HeightField.solid_distance`."""
+        field_ = self.heightfield
+        normal = field_.normal_at(p[:, 0], p[:, 2])
+        (x_lo, x_hi), (z_lo, z_hi) = field_.bounds()
+        beside = np.flatnonzero((p[:, 0] < x_lo) | (p[:, 0] > x_hi) | (p[:, 2] < z_lo) | (p[:, 2] > z_hi))
+        if beside.size:
+            q = p[beside]
+            up = np.maximum(q[:, 1] - field_.height_at(q[:, 0], q[:, 2]), 0.0)
+            away = np.column_stack([q[:, 0] - np.clip(q[:, 0], x_lo, x_hi), up, q[:, 2] - np.clip(q[:, 2], z_lo, z_hi)])
+            normal[beside] = _unit(away, _UP)
+        return normal
 
     @staticmethod
     def _box_distance(p: F64, h: F64) -> tuple[F64, F64]:
@@ -298,14 +317,18 @@ class Collider:
         return hit, t, np.broadcast_to(self.normal, o.shape).copy()
 
     def _ray_heightfield(self, o: F64, d: F64, transform: Transform, max_t: float) -> RayHits:
-        """Ray march + bracketed root refinement on f(t) = y(t) - h(x(t), z(t)).
+        """Ray march + bracketed root refinement on f(t) = y(t) - h(x(t), z(t)), and the column's side walls.
 
-        Only the surface above the footprint is hit: the ray is first clipped to the field's bounding box (its
-        x/z footprint × [min h, max h]) and to [0, max_t] (:meth:`_heightfield_interval`); that interval is sampled
-        at most every spacing/2 of horizontal travel, the first sign change of f (above → below) is bracketed,
-        then refined (Illinois false position, ``_refine_crossing``). One ray at a time in
-        :func:`_heightfield_interval_kernel` and :func:`_heightfield_march_kernel`; :meth:`_ray_heightfield_numpy`
-        is the numpy reference (the same bits). Crossings thinner than half a cell may be missed.
+        The solid is the column below the surface over the footprint (:meth:`HeightField.solid_distance`). A ray
+        that enters the footprint from beside it (at t = the later of its x and z slab entries, in [0, max_t])
+        with f < 0 there hits the side wall at that t, with the wall's outward normal (the axis entered last, x
+        when both at once) (:meth:`_heightfield_wall`). Otherwise only the surface above the footprint is hit: the
+        ray is clipped to the field's bounding box (its x/z footprint × [min h, max h]) and to [0, max_t]
+        (:meth:`_heightfield_interval`); that interval is sampled at most every spacing/2 of horizontal travel,
+        the first sign change of f (above → below) is bracketed, then refined (Illinois false position,
+        ``_refine_crossing``). One ray at a time in :func:`_heightfield_interval_kernel` and
+        :func:`_heightfield_march_kernel`; :meth:`_ray_heightfield_numpy` is the numpy reference (the same bits).
+        Crossings thinner than half a cell may be missed.
         """
         field_ = self.heightfield
         o, d = np.ascontiguousarray(o), np.ascontiguousarray(d)
@@ -314,7 +337,7 @@ class Collider:
         return _heightfield_march_kernel(
             o, d, t_start, t_end, active, self._heightfield_steps(longest),
             np.ascontiguousarray(field_.heights, dtype=np.float64), float(field_.origin[0]), float(field_.origin[1]),
-            float(field_.spacing), x_lo, x_hi, z_lo, z_hi)
+            float(field_.spacing), x_lo, x_hi, z_lo, z_hi, float(max_t))
 
     def _heightfield_box(self) -> tuple[F64, F64]:
         """The field's bounding box (lo, hi): its x/z footprint × [min h, max h], grown vertically by a pad so a
@@ -347,12 +370,40 @@ class Collider:
         horizontal = hypot(d[:, 0], d[:, 2]) * np.where(active, t_end - t_start, 0.0)
         return t_start, t_end, active, self._heightfield_steps(np.max(horizontal, initial=0.0))
 
+    def _heightfield_wall(self, o: F64, d: F64, max_t: float) -> tuple[NDArray[np.int64], F64, F64]:
+        """The rays that hit a side wall of the field's column: they enter the footprint's x/z rectangle (slab
+        method, the operations of :meth:`_heightfield_interval`) at some finite t in [0, max_t], below the
+        surface there. Their rows, t, and the wall's outward normal (the axis entered last, x when both at once)."""
+        field_ = self.heightfield
+        (x_lo, x_hi), (z_lo, z_hi) = field_.bounds()
+        lo, hi = np.array([x_lo, z_lo]), np.array([x_hi, z_hi])
+        oh, dh = o[:, [0, 2]], d[:, [0, 2]]
+        parallel = dh == 0.0
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            inv = 1.0 / np.where(parallel, 1.0, dh)
+            t1, t2 = (lo - oh) * inv, (hi - oh) * inv
+        slab_in = (oh >= lo) & (oh <= hi)
+        t_lo = np.where(parallel, np.where(slab_in, -np.inf, np.inf), np.minimum(t1, t2))
+        t_hi = np.where(parallel, np.where(slab_in, np.inf, -np.inf), np.maximum(t1, t2))
+        near = np.maximum(t_lo[:, 0], t_lo[:, 1])
+        enters = (near >= 0.0) & (near < np.inf) & (near <= np.minimum(t_hi[:, 0], t_hi[:, 1])) & (near <= max_t)
+        rows = np.flatnonzero(enters)  # (an entry at t = inf, from a subnormal direction, would sample a NaN point)
+        t = near[rows]
+        p = o[rows] + t[:, None] * d[rows]
+        below = p[:, 1] - field_.height_at(p[:, 0], p[:, 2]) < 0.0
+        rows, t = rows[below], t[below]
+        axis = np.where(t_lo[rows, 1] > t_lo[rows, 0], 2, 0)
+        normal = np.zeros((rows.size, 3))
+        normal[np.arange(rows.size), axis] = np.where(d[rows, axis] > 0.0, -1.0, 1.0)
+        return rows, t, normal
+
     def _ray_heightfield_numpy(self, o: F64, d: F64, transform: Transform, max_t: float) -> RayHits:
         """:meth:`_ray_heightfield` in numpy, loops over march chunks and refinement iterations, each vectorized
         over all rays (the reference of its kernel)."""
         field_ = self.heightfield
         n = len(o)
         t_start, t_end, active, steps = self._heightfield_interval(o, d, max_t)
+        wall, t_wall, wall_normal = self._heightfield_wall(o, d, max_t)
 
         def f(t: F64, rows: NDArray[np.int64]) -> F64:
             p = o[rows] + t[:, None] * d[rows]
@@ -360,7 +411,9 @@ class Collider:
 
         hit = np.zeros(n, dtype=bool)
         t_above, t_below = np.zeros(n), np.zeros(n)
-        pending = np.flatnonzero(active)
+        marching = active.copy()
+        marching[wall] = False  # the wall comes first; the march's step count stays that of every active ray
+        pending = np.flatnonzero(marching)
         span = np.where(active, t_end - t_start, 0.0)
         previous_t = t_start.copy()
         previous_f = np.full(n, np.inf)
@@ -391,6 +444,7 @@ class Collider:
         normal = np.zeros((n, 3))
         p = o[rays] + t[rays, None] * d[rays]
         normal[rays] = field_.normal_at(p[:, 0], p[:, 2])
+        hit[wall], t[wall], normal[wall] = True, t_wall, wall_normal
         return hit, t, normal
 
 
@@ -455,18 +509,35 @@ def field_height(heights: F64, ox: float, oz: float, spacing: float, x: float, z
     return top + tz * (bottom - top)
 
 
+@kernel(inline="always")
+def field_distance(heights: F64, ox: float, oz: float, spacing: float, x: float, y: float, z: float) -> float:
+    """HeightField.solid_distance for one point, in its operations (the footprint from ``bounds``, y − h over it,
+    √(g_x² + u² + g_z²) beside it): for kernels that test what lies inside a height field (the collider's
+    distances, the toon smoke's solid cells)."""
+    rows, cols = heights.shape
+    x_lo, x_hi = ox, ox + (cols - 1) * spacing
+    z_lo, z_hi = oz, oz + (rows - 1) * spacing
+    gap = y - field_height(heights, ox, oz, spacing, x, z)
+    gx = maximum(maximum(x_lo - x, x - x_hi), 0.0)
+    gz = maximum(maximum(z_lo - z, z - z_hi), 0.0)
+    if gx > 0.0 or gz > 0.0:
+        up = maximum(gap, 0.0)
+        return np.sqrt(gx * gx + up * up + gz * gz)
+    return gap
+
+
 @kernel
-def _heightfield_gap_kernel(p: F64, heights: F64, ox: float, oz: float, spacing: float) -> tuple[F64, bool]:
-    """y − HeightField.height_at(x, z) of every point, with its operations (:func:`field_height`), and True; False
-    as soon as a point's x or z is NaN (the gaps then unfinished), where height_at's indexing would fail."""
+def _heightfield_distance_kernel(p: F64, heights: F64, ox: float, oz: float, spacing: float) -> tuple[F64, bool]:
+    """HeightField.solid_distance of every point, with its operations (:func:`field_distance`), and True; False
+    as soon as a point's x or z is NaN (the distances then unfinished), where height_at's indexing would fail."""
     n = p.shape[0]
-    gap = np.empty(n)
+    distance = np.empty(n)
     for i in range(n):  # compiled loop over points
         x, z = p[i, 0], p[i, 2]
         if x != x or z != z:
-            return gap, False
-        gap[i] = p[i, 1] - field_height(heights, ox, oz, spacing, x, z)
-    return gap, True
+            return distance, False
+        distance[i] = field_distance(heights, ox, oz, spacing, x, p[i, 1], z)
+    return distance, True
 
 
 @kernel(inline="always")
@@ -531,14 +602,26 @@ def _heightfield_interval_kernel(o: F64, d: F64, lo: F64, hi: F64, max_t: float
 @kernel
 def _heightfield_march_kernel(o: F64, d: F64, t_start: F64, t_end: F64, active: NDArray[np.bool_], steps: int,
                               heights: F64, ox: float, oz: float, spacing: float, x_lo: float, x_hi: float,
-                              z_lo: float, z_hi: float) -> tuple[NDArray[np.bool_], F64, F64]:
-    """(hit, t, local normal) of every ray: the first sign change of f over ``steps`` samples of [t_start, t_end],
-    refined, and the field's normal at the hit (0 for misses)."""
+                              z_lo: float, z_hi: float, max_t: float) -> tuple[NDArray[np.bool_], F64, F64]:
+    """(hit, t, local normal) of every ray: a side wall entered below the surface (Collider._heightfield_wall),
+    else the first sign change of f over ``steps`` samples of [t_start, t_end], refined, and the field's normal at
+    the hit (0 for misses)."""
     n = o.shape[0]
     hit = np.zeros(n, np.bool_)
     t_out = np.full(n, np.inf)
     normal = np.zeros((n, 3))
     for i in range(n):
+        near_x, far_x = _slab_interval(o[i, 0], d[i, 0], x_lo, x_hi)
+        near_z, far_z = _slab_interval(o[i, 2], d[i, 2], z_lo, z_hi)
+        near = maximum(near_x, near_z)
+        if near >= 0.0 and near < np.inf and near <= minimum(far_x, far_z) and near <= max_t:
+            if _ray_height_gap(o, d, i, near, heights, ox, oz, spacing) < 0.0:
+                hit[i], t_out[i] = True, near
+                if near_z > near_x:
+                    normal[i, 2] = -1.0 if d[i, 2] > 0.0 else 1.0
+                else:
+                    normal[i, 0] = -1.0 if d[i, 0] > 0.0 else 1.0
+                continue
         if not active[i]:
             continue
         span = t_end[i] - t_start[i]

@@ -23,7 +23,10 @@ F64 = NDArray[np.float64]
 class HeightField:
     """A grid of float64 heights with uniform ``spacing``; ``origin`` is the (x, z) of ``heights[0, 0]``.
 
-    Sampling outside the grid clamps to the border: the surface continues flat-extruded from its edges.
+    Sampling outside the grid (:meth:`height_at`, :meth:`normal_at`) clamps to the border: the surface continues
+    flat-extruded from its edges, for what follows or stands on the ground (placement, terrain following). As a
+    solid (:meth:`solid_distance`, a height-field Collider) the field is finite: the column below its surface over
+    its footprint (:meth:`bounds`, edges included), as Bullet's and PhysX's height fields are, and nothing beside it.
     """
 
     heights: F64
@@ -53,7 +56,10 @@ class HeightField:
         return float(self.heights.min()), float(self.heights.max())
 
     def height_at(self, x: ArrayLike, z: ArrayLike) -> F64:
-        """Bilinear interpolation of the four surrounding samples, clamped at the borders; any broadcast shape."""
+        """Bilinear interpolation of the four surrounding samples, clamped at the borders; any broadcast shape.
+
+        Outside the footprint this is the height of the nearest border point, not a solid there: see
+        :meth:`solid_distance` for what lies inside the field."""
         x, z = np.asarray(x, dtype=np.float64), np.asarray(z, dtype=np.float64)
         if x.shape != z.shape:
             x, z = np.broadcast_arrays(x, z)
@@ -84,6 +90,28 @@ class HeightField:
         dhdz = (self.height_at(x, zb) - self.height_at(x, za)) / (zb - za)
         n = np.stack([-dhdx, np.ones_like(dhdx), -dhdz], axis=-1)
         return n / np.linalg.norm(n, axis=-1, keepdims=True)
+
+    def solid_distance(self, x: ArrayLike, y: ArrayLike, z: ArrayLike) -> F64:
+        """Signed distance to the field as a solid, the column below the surface over the footprint; negative
+        inside, any broadcast shape.
+
+        Over the footprint (its edges included): the vertical gap y − h(x, z). Beside it: the distance to the
+        column's point straight across the footprint's border, √(g_x² + u² + g_z²), with g_x, g_z ≥ 0 the
+        horizontal gaps to the footprint (one of them > 0) and u = max(y − h, 0) the height above the border's
+        surface h (the clamped sample, :meth:`height_at`): the horizontal gap beside the walls (exact there), an
+        upper bound above the border's height (as the vertical gap is over the footprint). Never negative beside
+        the footprint, however low the point: a point under the surface's level but outside its extent is
+        outside the solid. NaN x or z fail in :meth:`height_at`'s indexing.
+        """
+        x, y, z = np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in (x, y, z)))
+        (x_lo, x_hi), (z_lo, z_hi) = self.bounds()
+        gap = y - self.height_at(x, z)
+        gx = np.maximum(np.maximum(x_lo - x, x - x_hi), 0.0)
+        gz = np.maximum(np.maximum(z_lo - z, z - z_hi), 0.0)
+        up = np.maximum(gap, 0.0)
+        with np.errstate(over="ignore"):  # a far point: an infinite distance, still positive
+            beside = np.sqrt(gx * gx + up * up + gz * gz)
+        return np.where((gx > 0.0) | (gz > 0.0), beside, gap)
 
     def bounds(self) -> tuple[tuple[float, float], tuple[float, float]]:
         """Footprint ((x_min, x_max), (z_min, z_max)) covered by the samples."""

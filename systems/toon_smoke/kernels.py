@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from engine.collider import field_height
+from engine.collider import field_distance
 from engine.jit import kernel, pairwise_sum
 
 
@@ -881,12 +881,13 @@ def _display_cell(x, half, h, factor, n):  # pragma: no cover
 #
 # The numpy path (:func:`systems.toon_smoke.simulate._solid_mask_numpy`) turns every cell centre into world
 # coordinates (``quat_rotate``, two cross products over all the points), then into the collider's frame (two more)
-# and samples the height field (``HeightField.height_at``): on a puff's 32³ display grid about 7 ms per height field,
-# and a puff near the ground in the demo overlaps two (the terrain and the water).  The kernel below does the same
-# float64 operations per point, in the same order: ``engine.spatial.quat_rotate`` (v + 2·u × (u × v + w·v), the
-# cross products' terms as ``engine.spatial.cross``), the collider's conjugate rotation, and the bilinear sample
-# (clamped, lerped along x, then z).  A sign of zero may differ where numpy's clip returns its bound; the
-# comparison d < 0 does not see it.
+# and measures the height field's solid (``HeightField.solid_distance``: nothing beside the footprint, the gap to
+# ``HeightField.height_at`` over it): on a puff's 32³ display grid about 7 ms per height field, and a puff near the
+# ground in the demo overlaps two (the terrain and the water).  The kernel below does the same float64 operations
+# per point, in the same order: ``engine.spatial.quat_rotate`` (v + 2·u × (u × v + w·v), the cross products' terms
+# as ``engine.spatial.cross``), the collider's conjugate rotation, and the solid's distance
+# (:func:`engine.collider.field_distance`: the footprint's walls, the bilinear sample clamped, lerped along x, then
+# z).  A sign of zero may differ where numpy's clip returns its bound; the comparison d < 0 does not see it.
 
 
 @kernel(inline="always")
@@ -902,8 +903,8 @@ def _rotate(qw, qx, qy, qz, vx, vy, vz):  # pragma: no cover
 def heightfield_solid_kernel(xs, ys, zs, position, rotation, field_position, field_rotation, heights, spacing,
                              origin, solid):  # pragma: no cover
     """solid[i, j, k] |= the cell centre (xs[i], ys[j], zs[k]) (local metres of a volume placed at ``position``,
-    ``rotation``) lies below a height field collider (``Collider.signed_distance`` < 0: the collider-frame height
-    minus ``HeightField.height_at``).  Finite coordinates; ``solid`` in place."""
+    ``rotation``) lies inside a height field collider (``Collider.signed_distance`` < 0: below the surface over the
+    footprint, ``HeightField.solid_distance``; nothing beside it).  Finite coordinates; ``solid`` in place."""
     qw, qx, qy, qz = rotation[0], rotation[1], rotation[2], rotation[3]
     cw, cx, cy, cz = field_rotation[0], -1.0 * field_rotation[1], -1.0 * field_rotation[2], -1.0 * field_rotation[3]
     for i in range(xs.shape[0]):
@@ -912,5 +913,5 @@ def heightfield_solid_kernel(xs, ys, zs, position, rotation, field_position, fie
                 rx, ry, rz = _rotate(qw, qx, qy, qz, xs[i], ys[j], zs[k])
                 px, py, pz = _rotate(cw, cx, cy, cz, (position[0] + rx) - field_position[0],
                                      (position[1] + ry) - field_position[1], (position[2] + rz) - field_position[2])
-                if py - field_height(heights, origin[0], origin[1], spacing, px, pz) < 0.0:
+                if field_distance(heights, origin[0], origin[1], spacing, px, py, pz) < 0.0:
                     solid[i, j, k] = True

@@ -180,6 +180,84 @@ def test_flat_heightfield_ray_cast_and_rotation():
     np.testing.assert_allclose(normal, [[0, 0, 1]], atol=1e-12)
 
 
+def _pond():
+    """A flat field at y = 0 over [-3.75, 3.75]² (16 × 16 samples), as a water surface makes."""
+    return HeightField(heights=np.zeros((16, 16)), spacing=0.5, origin=np.array([-3.75, -3.75]))
+
+
+def test_heightfield_is_solid_only_over_its_footprint():
+    # A point below the surface's level was inside however far beside the footprint (height_at clamps to the
+    # border), so a ray starting there hit at t = 0: a water surface 8 m away swallowed an energy wave as it left
+    # its emitter. The solid is the column below the surface over the footprint, as Bullet's and PhysX's.
+    collider = Collider(shape="heightfield", heightfield=_pond())
+    hit, t, normal = collider.ray_cast([[-8.0, -0.67, 6.0]], [[0.0, 0.0, -0.33]], Transform(), max_t=1.0)
+    assert not hit[0] and np.isinf(t[0]) and (normal == 0.0).all()
+    points = np.array([[-8.0, -0.67, 6.0],  # beside a corner, below the level: √(4.25² + 2.25²)
+                       [-3.76, -5.0, 0.0],  # just beside the x = -3.75 wall: 0.01
+                       [0.0, -5.0, 3.85],  # beside the z = 3.75 wall
+                       [5.75, 2.0, 0.0],  # beside and above the border's height: √(2² + 2²)
+                       [-3.75, -5.0, 3.75],  # on the corner's edge, below: inside (edges included)
+                       [1.0, -0.5, -2.0]])  # over the footprint, below: inside, vertical gap
+    want = [np.sqrt(4.25 ** 2 + 2.25 ** 2), 0.01, 0.1, np.sqrt(8.0), -5.0, -0.5]
+    for transform in (Transform(), Transform(position=[2.0, 1.0, -3.0], rotation=quat_from_euler(0.3, 0.7, -0.2))):
+        world = _placed(transform, points)
+        np.testing.assert_allclose(collider.signed_distance(world, transform), want, atol=1e-12)
+        depth, normal = collider.query(world, transform)
+        np.testing.assert_allclose(depth, [0.0, 0.0, 0.0, 0.0, 5.0, 0.5], atol=1e-12)
+        local_normal = [[-4.25, 0.0, 2.25], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0],
+                        [0.0, 1.0, 0.0]]  # beside: from the column's nearest point straight across; over: the surface
+        local_normal = np.array(local_normal) / np.linalg.norm(local_normal, axis=1, keepdims=True)
+        np.testing.assert_allclose(normal, _placed(Transform(rotation=transform.rotation), local_normal),
+                                   atol=1e-12)
+        up = _placed(Transform(rotation=transform.rotation), np.tile([0.0, 1.0, 0.0], (6, 1)))
+        inside = collider.ray_cast(world, up, transform, max_t=0.5)  # straight up the field's frame
+        np.testing.assert_array_equal(inside[0], [False, False, False, False, True, True])
+
+
+def _placed(transform: Transform, points) -> np.ndarray:
+    """Points given in a collider's frame, in the world (the transform's rotation, then its position)."""
+    from engine.spatial import quat_rotate
+
+    return quat_rotate(transform.rotation, np.asarray(points, float)) + transform.position
+
+
+def test_heightfield_side_walls_stop_rays_that_enter_below_the_surface():
+    """A ray entering the footprint from beside it below the surface hits the side wall where it enters, with the
+    wall's outward normal; one entering above it flies on to the surface (or through); a ray that never enters
+    the footprint misses, however low. Rotated too, and the kernel and the numpy reference agree."""
+    collider = Collider(shape="heightfield", heightfield=_tilted_field())  # h = 1 + 0.5x + 0.25z on [-4, 4]²
+    origins = np.array([[-6.0, -1.5, 0.0],  # → +x below the wall's top (h(-4, 0) = -1): hits x = -4 at t = 2
+                        [0.0, 0.0, 7.0],  # → -z, h(0, 4) = 2 above: hits z = 4 at t = 3
+                        [-7.0, 0.0, -7.0],  # diagonally at the corner (-4, -4), h = -2 there: enters above
+                        [-6.0, -3.5, -1.0],  # → +x, h(-4, -1) = -1.25 > -3.5 at the wall: t = 2
+                        [-6.0, 9.0, 0.0],  # → +x high above: misses
+                        [-6.0, -20.0, 0.0],  # → +z beside the footprint, far below: misses
+                        [6.0, -20.0, 6.0],  # → up beside a corner: misses
+                        [-6.0, -1.5, 0.0]])  # → +x but max_t stops it short of the wall
+    dirs = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 1.0], [1.0, 0.0, 0.0], [1.0, 0.0, 0.0],
+                     [0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])
+    max_t = np.array([50.0, 50.0, 50.0, 50.0, 50.0, 50.0, 50.0, 1.9])
+    for transform in (Transform(), Transform(position=[0.5, -2.0, 1.0], rotation=quat_from_euler(0.9, 0.2, 0.1))):
+        world_o = _placed(transform, origins)
+        world_d = _placed(Transform(rotation=transform.rotation), dirs)
+        rows = [collider.ray_cast(world_o[i:i + 1], world_d[i:i + 1], transform, max_t[i]) for i in range(8)]
+        hit = np.array([r[0][0] for r in rows])
+        t = np.array([r[1][0] for r in rows])
+        normal = np.array([r[2][0] for r in rows])
+        np.testing.assert_array_equal(hit, [True, True, True, True, False, False, False, False])
+        np.testing.assert_allclose(t[[0, 1, 3]], [2.0, 3.0, 2.0], atol=1e-12)
+        local = [[-1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [-1.0, 0.0, 0.0]]
+        np.testing.assert_allclose(normal[[0, 1, 3]], _placed(Transform(rotation=transform.rotation),
+                                                                         local), atol=1e-12)
+        # the diagonal ray passes the corner above the surface and meets it inside: 0 = 1 + 0.75 (s - 7)
+        assert 3.0 < t[2] < 7.0 and normal[2] @ _placed(Transform(rotation=transform.rotation),
+                                                                  [[0.0, 1.0, 0.0]])[0] > 0.5
+        np.testing.assert_allclose(t[2], 7.0 - 1.0 / 0.75, atol=1e-9)
+        for a, b in zip(collider.ray_cast(world_o, world_d, transform, 50.0),
+                        collider._ray_cast_numpy(world_o, world_d, transform, 50.0)):
+            _same_bits(a, b)
+
+
 def test_constructor_validation():
     with pytest.raises(ValueError, match="unknown collider shape 'cube'"):
         Collider(shape="cube")
@@ -318,7 +396,8 @@ def test_box_kernels_accept_non_contiguous_and_list_input():
 def test_heightfield_ray_cast_kernel_matches_numpy_bit_for_bit():
     """The compiled march + Illinois refinement against the numpy reference: rough fields (midpoint displacement,
     a flat one, a tiny 2 × 2 one), rays from above, below, inside and outside the footprint, grazing, vertical,
-    horizontal and zero-length; several max_t."""
+    horizontal and zero-length, from the footprint's borders and along them; several max_t. Rays from beside the
+    footprint that enter it below the surface hit a side wall (normal horizontal) in both."""
     from engine.heightfield import midpoint_displacement
     from engine.spatial import quat_conjugate, quat_rotate
 
@@ -327,7 +406,7 @@ def test_heightfield_ray_cast_kernel_matches_numpy_bit_for_bit():
                           origin=[-11.0, -9.0]),
               HeightField(heights=np.full((5, 4), 1.5), spacing=2.0, origin=[0.0, 0.0]),
               HeightField(heights=np.array([[0.0, 1.0], [2.0, -1.0]]), spacing=3.0, origin=[-1.5, -1.5])]
-    hits = 0
+    hits = walls = 0
     for field in fields:
         collider = Collider(shape="heightfield", heightfield=field)
         transform = Transform(position=[0.3, -0.2, 0.1], rotation=quat_from_euler(0.2, 0.05, -0.1))
@@ -338,18 +417,30 @@ def test_heightfield_ray_cast_kernel_matches_numpy_bit_for_bit():
         dirs[n // 6: n // 3, 1] *= 1e-3  # grazing
         dirs[n // 3: n // 3 + 50, 1] = 0.0  # horizontal
         dirs[-20:] = 0.0  # no direction at all
+        (x_lo, x_hi), (z_lo, z_hi) = field.bounds()
+        border = slice(n // 3 + 50, n // 3 + 250)  # origins (in the field's frame) on the borders, some along them
+        local = rng.uniform(-14.0, 14.0, (200, 3))
+        local[:, 0] = np.where(np.arange(200) % 2 == 0, x_lo, x_hi)
+        local[100:, [0, 2]] = local[100:, [2, 0]]
+        local[100:, 2] = np.where(np.arange(100) % 2 == 0, z_lo, z_hi)
+        origins[border] = quat_rotate(transform.rotation, local) + transform.position
+        dirs[n // 3 + 50: n // 3 + 90] = quat_rotate(transform.rotation, np.array([0.0, 0.3, 1.0]))
         for max_t in (np.inf, 3.0, 0.0):
             inverse = quat_conjugate(transform.rotation)  # the shape functions work in the collider's frame
             o, d = quat_rotate(inverse, origins - transform.position), quat_rotate(inverse, dirs)
-            want = collider._ray_heightfield_numpy(o, d, transform, max_t)
+            beside = slice(n // 3 + 250, n // 3 + 270)  # from beside x_lo with a subnormal x direction: an entry
+            o[beside, 0], d[beside] = x_lo - 1.0, [5e-324, -1.0, 0.0]  # at t = inf (along z: x never changes)
+            with np.errstate(over="ignore"):  # 1 / 5e-324
+                want = collider._ray_heightfield_numpy(o, d, transform, max_t)
             got = collider._ray_heightfield(o, d, transform, max_t)
             for a, b in zip(want, got):
                 _same_bits(a, b)
             hits += int(want[0].sum())
+            walls += int((want[0] & (want[2][:, 1] == 0.0)).sum())
             for a, b in zip(collider.ray_cast(origins, dirs, transform, max_t),
                             collider._ray_cast_numpy(origins, dirs, transform, max_t)):
                 _same_bits(a, b)
-    assert hits > 300  # the cases do hit (415 with this seed)
+    assert hits > 300 and walls > 100  # the cases do hit (1223, 838 of them side walls, with this seed)
 
 
 def test_heightfield_interval_kernel_matches_numpy_bit_for_bit():
@@ -399,10 +490,11 @@ def test_heightfield_interval_kernel_matches_numpy_bit_for_bit():
             collider._heightfield_steps(_heightfield_interval_kernel(o, d, lo, hi, 1.0)[3])
 
 
-def test_heightfield_gap_kernel_matches_height_at_bit_for_bit():
-    """y − h(x, z) (the signed distance, the ray casts' inside test) compiled against HeightField.height_at: points
-    inside and outside the footprint, on grid nodes and borders, at ±0, ±inf and huge coordinates; NaN and
-    float32 heights take height_at itself (NaN still fails there as it did)."""
+def test_heightfield_distance_kernel_matches_solid_distance_bit_for_bit():
+    """The signed distance (the ray casts' inside test) compiled against HeightField.solid_distance: points inside
+    and outside the footprint, on grid nodes and borders, one float beside them, at ±0, ±inf and huge coordinates
+    (an overflowing distance), a NaN height; over the footprint it is y − height_at, as it always was. NaN x or z
+    and float32 heights take solid_distance itself (NaN still fails there as it did)."""
     from engine.heightfield import midpoint_displacement
 
     rng = np.random.default_rng(23)
@@ -418,17 +510,29 @@ def test_heightfield_gap_kernel_matches_height_at_bit_for_bit():
     p[520:540, 0], p[540:560, 2] = x_hi, z_hi
     p[560:580, 0], p[580:600, 2] = np.inf, -np.inf
     p[600:620, [0, 2]] = [1e300, -1e300]
-    want = p[:, 1] - field.height_at(p[:, 0], p[:, 2])
-    _same_bits(collider._heightfield_gap(p), want)
+    p[620:640, 0] = np.nextafter(x_lo, -1.0)  # one float beside the footprint, far below the surface (x_lo is
+    p[640:660, 2] = np.nextafter(z_hi, 99.0)  # -0.0: the gap 5e-324 squares to 0, so the distance is 0: not inside)
+    p[620:640, 2], p[640:660, 0], p[620:660, 1] = z_lo + 1.0, x_lo + 1.0, -50.0
+    p[660:680, 1] = np.nan
+    p[680:700, 0], p[680:700, 1] = x_hi + 1e-160, 9.0  # a gap whose square underflows, above the border's surface
+    with np.errstate(invalid="ignore"):
+        want = field.solid_distance(p[:, 0], p[:, 1], p[:, 2])
+        _same_bits(collider._heightfield_distance(p), want)
     finite = np.isfinite(p).all(axis=1)  # (the identity rotation of an infinite point gives NaN)
     _same_bits(collider.signed_distance(p[finite], Transform()), want[finite])
+    over = (p[:, 0] >= x_lo) & (p[:, 0] <= x_hi) & (p[:, 2] >= z_lo) & (p[:, 2] <= z_hi)
+    assert 500 < over.sum() < 2500
+    _same_bits(want[over], p[over, 1] - field.height_at(p[over, 0], p[over, 2]))
+    beside = ~over & ~np.isnan(p[:, 1])
+    assert (want[beside] >= 0.0).all() and (want[620:640] == 0.0).all() and (want[640:660] > 0.0).all()
     single = Collider(shape="heightfield", heightfield=HeightField(heights=field.heights.astype(np.float32),
                                                                     spacing=0.6, origin=[-0.0, -4.2]))
-    single.heightfield.heights = field.heights.astype(np.float32)  # float32 heights: height_at's own arithmetic
-    _same_bits(single._heightfield_gap(p), p[:, 1] - single.heightfield.height_at(p[:, 0], p[:, 2]))
+    single.heightfield.heights = field.heights.astype(np.float32)  # float32 heights: solid_distance's arithmetic
+    with np.errstate(invalid="ignore"):
+        _same_bits(single._heightfield_distance(p), single.heightfield.solid_distance(p[:, 0], p[:, 1], p[:, 2]))
     p[1234, 2] = np.nan
     with pytest.raises(IndexError), np.errstate(invalid="ignore"):
-        collider._heightfield_gap(p)
+        collider._heightfield_distance(p)
 
 
 @pytest.mark.parametrize("rotated", [False, True])

@@ -507,3 +507,39 @@ def test_a_fast_beam_hits_a_thin_wall_just_ahead_of_the_emitter():
     assert np.all(position[beam & (age >= dt), 2] >= -0.30)  # swept once: none went through
     # only the particles of the last step, not swept yet, may lie up to beam_speed·dt ahead (the wall hides them)
     assert np.all(position[beam, 2] >= -45.0 * dt - cfg.beam_radius)
+
+
+def _pond(app, position) -> int:
+    """A still 7.5 m water surface's collider (a flat height field, layer 'water') at ``position``."""
+    field = HeightField(np.zeros((16, 16)), 0.5, np.array([-3.75, -3.75]))
+    return app.world.spawn(Transform(position=np.array(position, float)),
+                           Collider("heightfield", heightfield=field, layer="water"))
+
+
+def test_a_pond_beside_the_emitter_does_not_swallow_the_beam():
+    # A height field counted every point below its surface's level as inside, however far beside its footprint:
+    # with a pond 8 m away whose surface is 1 m above the emitter, every particle hit the pond at t = 0 where it
+    # was emitted. The pond is solid over its footprint only.
+    app = make_app(5)
+    pond = _pond(app, (8.0, 1.0, 0.0))
+    wall = add_box(app, (0.0, 0.0, -3.0), (1.0, 1.0, 0.1))
+    entity, _, st = add_emitter(app, beam_speed=10.0, emission_rate=600.0)
+    hits = [h for tick in _events(app, EnergyWaveHit, 40) for h in tick]
+    impacts = [i for tick in _events(app, Impact, 5) for i in tick]
+    assert hits and all(h.target == wall for h in hits)
+    assert impacts and all(i.target == wall for i in impacts) and pond not in [i.target for i in impacts]
+
+
+def test_a_beam_below_a_ponds_surface_hits_its_side():
+    """The pond is the column below its surface over its footprint: a beam flying at it below its surface's
+    level stops at the footprint's side (z = -4.25), with the side's normal."""
+    app = make_app(5)
+    pond = _pond(app, (0.0, 1.0, -8.0))
+    entity, _, st = add_emitter(app, beam_radius=0.2, beam_speed=10.0, emission_rate=600.0)
+    hits = [h for tick in _events(app, EnergyWaveHit, 50) for h in tick]
+    assert hits and all(h.target == pond for h in hits)
+    for h in hits:
+        np.testing.assert_allclose(h.normal, [0.0, 0.0, 1.0], atol=1e-9)
+    hit_points = live(st, "hit_point")[live(st, "pattern") >= 0]
+    assert len(hit_points) > 20
+    np.testing.assert_allclose(hit_points[:, 2], -4.25, atol=1e-9)

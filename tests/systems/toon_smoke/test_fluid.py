@@ -672,3 +672,36 @@ def test_coarsest_inverse_is_the_pseudo_inverse(open_sides, split):
     reference = np.linalg.pinv(m)
     assert np.abs(inverse - reference).max() <= 1e-12 * np.abs(reference).max()
     assert np.abs(m @ inverse @ m - m).max() <= 1e-12 * np.abs(m).max()
+
+
+def test_a_height_field_beside_the_volume_makes_no_cell_solid():
+    """A height field is solid only over its footprint. Every cell below a pond's level was solid, however far
+    beside it (the clamped height extends its border outwards): a volume at x = -10, y = 0 with a pond 20 m away at
+    y = 5 had all 512 of 512 cells solid. Now none are; a volume straddling the pond's edge is solid only over the
+    footprint, in the compiled mask and its numpy reference alike."""
+    from engine.collider import Collider
+    from engine.heightfield import HeightField
+    from engine.world import World
+    from systems.toon_smoke import simulate
+
+    cfg = small(obstacle_radius=0.0, simulation_resolution=[8, 8, 8], display_resolution=[16, 16, 16],
+                extent=[2.0, 2.0, 2.0])
+    pond = HeightField(np.zeros((16, 16)), spacing=0.5, origin=np.array([-3.75, -3.75]))
+    world = World()
+    world.spawn(Transform(position=np.array([10.0, 5.0, 0.0])), Collider(shape="heightfield", heightfield=pond,
+                                                                        layer="water"))
+    volume = world.spawn(Transform(position=np.array([-10.0, 0.0, 0.0])))
+    state = simulate.new_state(cfg, np.random.default_rng(0))
+    transform = world.get(volume, Transform)
+    assert len(simulate._overlapping_colliders(world, volume, transform, cfg)) == 1  # it is in reach (by height)
+    simulate.update_obstacles(world, volume, transform, cfg, state)
+    assert state.solid.size == 512 and not state.solid.any() and not state.display_solid.any()
+
+    edge = Transform(position=np.array([10.0 - 3.75, 4.0, 0.0]))  # centred on the pond's x = -3.75 wall, below
+    geo = simulate.geometry_for(cfg)
+    colliders = simulate._overlapping_colliders(world, volume, edge, cfg)
+    for centres in (geo.local_centres(), geo.local_display_centres()):
+        got = simulate._solid_mask(centres, edge, cfg, colliders)
+        assert np.array_equal(got, simulate._solid_mask_numpy(centres, edge, cfg, colliders))
+        x = np.broadcast_arrays(*centres)[0]
+        assert np.array_equal(got, x >= 0.0)  # the half over the footprint (all of it below the surface)
