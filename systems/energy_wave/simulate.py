@@ -95,9 +95,16 @@ def collider_bounds(collider: Collider, transform: Transform) -> tuple[F64 | Non
         r = collider.radius * float(np.max(np.abs(transform.scale)))
         return transform.position - r, transform.position + r
     if collider.shape == "heightfield" and quat_is_identity(transform.rotation):
-        # Solid below the surface; outside its footprint the field is extruded, so only the top is bounded.
-        top = float(collider.heightfield.heights.max()) + transform.position[1]  # height_range[1], without its min
-        return np.full(3, -np.inf), np.array([np.inf, top, np.inf])
+        # Solid in the column below the surface over the footprint (engine.heightfield.HeightField.solid_distance;
+        # height fields ignore scale): bounded but for its bottom.
+        field = collider.heightfield
+        (x_lo, x_hi), (z_lo, z_hi) = field.bounds()
+        top = float(field.heights.max()) + transform.position[1]  # height_range[1], without its min
+        low = np.array([x_lo + transform.position[0], -np.inf, z_lo + transform.position[2]])
+        high = np.array([x_hi + transform.position[0], top, z_hi + transform.position[2]])
+        pad = 1e-9 * (1.0 + np.maximum(np.abs(low), np.abs(high)))  # the collider subtracts the position instead:
+        pad[1] = 0.0  # a point on the footprint's edge must stay a candidate whatever the rounding
+        return low - pad, high + pad
     return None, None
 
 

@@ -174,3 +174,18 @@ def test_candidates_follow_the_bounds_and_the_mask():
     masked = sweep_candidates(p0, p1, colliders, allowed)
     assert masked[3].tolist() == [False] * 4 and masked[0].tolist() == [True, False, False, False]
     assert sweep_candidates(np.zeros((0, 3)), np.zeros((0, 3)), colliders).shape == (len(colliders), 0)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_height_fields_bounds_keep_every_segment_that_hits_it_and_drop_those_beside_it(seed):
+    """An unrotated height field is bounded on x and z by its footprint (it is solid only over it) and above by
+    its highest sample: every segment its ray cast hits is a candidate, and segments beside the footprint are not."""
+    entry = _scene()[6]
+    assert entry.entity == 7 and np.isfinite(entry.lo[[0, 2]]).all() and entry.lo[1] == -np.inf
+    p0, p1 = _segments(4000, seed)
+    p0, p1 = p0 * 3.0, p1 * 3.0  # reach well beside the 4 x 4 footprint
+    candidates = sweep_candidates(p0, p1, [entry])[0]
+    hit, _, _ = entry.collider.ray_cast(p0, p1 - p0, entry.transform, max_t=1.0)
+    assert hit.sum() > 50 and not (hit & ~candidates).any()
+    beside = (np.fmin(p0[:, 0], p1[:, 0]) > 2.0 + 1e-6) | (np.fmax(p0[:, 2], p1[:, 2]) < -2.0 - 1e-6)
+    assert beside.sum() > 100 and not (candidates & beside).any()
