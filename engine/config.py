@@ -8,6 +8,7 @@ where one can be found (tomllib keeps none, so :func:`locate_line` scans the tex
 from __future__ import annotations
 
 import difflib
+import os
 import re
 import sys
 from collections.abc import Iterable, Sequence
@@ -15,7 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -25,9 +26,32 @@ else:  # pragma: no cover - exercised on 3.10 only
 
 class ConfigModel(BaseModel):
     """Base of every config a modder writes: unknown keys are errors, strings never pass as numbers, and
-    TOML's ``nan`` / ``inf`` never pass as a float (they would poison a simulation without an error)."""
+    TOML's ``nan`` / ``inf`` never pass as a float (they would poison a simulation without an error), nor do
+    subnormal numbers (0 < |x| < 2.2e-308: a bound like ``gt=0`` lets 5e-324 through, whose reciprocal is
+    infinite)."""
 
     model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
+
+    @field_validator("*", mode="after")
+    @classmethod
+    def _no_subnormal(cls, value: Any) -> Any:
+        tiny = _subnormal(value)
+        if tiny is not None:
+            raise ValueError(f"too small to compute with (a subnormal number): expected 0 or a "
+                             f"magnitude of at least {sys.float_info.min:.3g}")
+        return value
+
+
+def _subnormal(value: Any) -> float | None:
+    """The first subnormal float in ``value`` (a number, or lists and tuples of them), else None."""
+    if isinstance(value, float):
+        return value if value != 0.0 and abs(value) < sys.float_info.min else None
+    if isinstance(value, (list, tuple)):
+        for item in value:
+            tiny = _subnormal(item)
+            if tiny is not None:
+                return tiny
+    return None
 
 
 def _as_tuple(v: list[float]) -> tuple[float, ...]:
@@ -131,6 +155,9 @@ def read_toml(path: Path) -> tuple[dict, str]:
         match = re.search(r"line (\d+)", str(exc))
         line = int(match.group(1)) if match else None
         raise ConfigError([Problem(str(path), "", f"TOML syntax error: {exc}", line=line)]) from None
+    except RecursionError:  # arrays or inline tables nested hundreds deep: the parser recurses per level
+        raise ConfigError([Problem(str(path), "", "arrays or tables nested too deeply to read (hundreds of "
+                                                  "levels)")]) from None
 
 
 _HEADER = re.compile(r"^\s*(\[\[?)\s*([^\]]+?)\s*\]\]?\s*(#.*)?$")
@@ -244,6 +271,8 @@ def model_problems(exc: ValidationError, model: type[BaseModel], file: str, pref
             message = message.replace("Input should be", "expected")
             opts = re.findall(r"'([^']+)'", err["msg"])
             suggestion = suggest(str(err.get("input")), opts) if opts else None
+        elif err["type"] in ("model_type", "model_attributes_type", "dict_type"):  # no Python class names
+            message = "expected a table (`[name]`, `[[name]]` or `{ key = value }`)"
         else:
             message = message.replace("Input should be", "expected")
             if err["type"] in ("value_error", "assertion_error"):  # a validator's own words, without pydantic's prefix
@@ -302,6 +331,10 @@ def resolve_inside(root: Path, relative: str, suffix: str = "") -> Path:
         raise ValueError(f"path '{relative}' must be relative to the configs root {root}")
     if suffix and rel.suffix != suffix:
         rel = rel.with_name(rel.name + suffix)
+    longest = max((len(os.fsencode(part)) for part in rel.parts), default=0)
+    if longest > NAME_MAX or len(os.fsencode(str(root / rel))) > PATH_MAX:  # the OS refuses them (ENAMETOOLONG)
+        raise ValueError(f"path '{relative[:40]}...' is too long: a file or folder name may have at most "
+                         f"{NAME_MAX} bytes, a whole path {PATH_MAX}")
     candidate = (root / rel).resolve()
     try:
         candidate.relative_to(root)
@@ -310,6 +343,7 @@ def resolve_inside(root: Path, relative: str, suffix: str = "") -> Path:
     return candidate
 
 
+NAME_MAX, PATH_MAX = 255, 4096  # bytes: Linux's limits, and the usual ones elsewhere
 STOCK_CONFIGS = Path(__file__).resolve().parents[1] / "configs"  # the engine's own configs (stock presets, assets)
 
 

@@ -89,6 +89,7 @@ class Registry:
     scripts: dict[str, type[Script]] = field(default_factory=dict)
     schedule: Schedule = field(default_factory=Schedule)
     render_features: list[Callable[..., Any]] = field(default_factory=list)
+    render_feature_names: list[str] = field(default_factory=list)
     commands: dict[str, Callable[..., Any]] = field(default_factory=dict)
     world_setup: list[Callable[[World], None]] = field(default_factory=list)
     scene_checks: list[Callable[..., Any]] = field(default_factory=list)
@@ -135,9 +136,14 @@ class Registry:
             raise RegistryError(f"command '{name}' is already registered")
         self.commands[name] = fn
 
-    def add_render_feature(self, factory: Callable[..., Any]) -> None:
-        """``factory(renderer)`` returns an object with ``extract(world)`` and ``add_passes(graph, frame)``."""
+    def add_render_feature(self, factory: Callable[..., Any], name: str | None = None) -> None:
+        """``factory(renderer)`` returns an object with ``extract(world)`` and ``add_passes(graph, frame)``.
+        ``name``: the feature's ``name`` (what a Camera's ``hide_features`` lists), for a factory that defers
+        importing its class (and GL) until a renderer asks; a class's own ``name`` is used when omitted."""
         self.render_features.append(factory)
+        name = name if name is not None else getattr(factory, "name", None)
+        if name:
+            self.render_feature_names.append(name)
 
     def add_scene_check(self, fn: Callable[..., Any]) -> None:
         """``fn(plan, text)`` looks across a validated scene (``engine.scene.ScenePlan`` and the scene file's

@@ -20,13 +20,14 @@ without problems is spawned, so a bad edit never leaves a half-built world.
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import Field
+from pydantic import Field, field_validator
 
-from engine.config import (ConfigError, ConfigModel, Problem, Vec3, deep_merge, locate_line, model_problems,
+from engine.config import (Color3, ConfigError, ConfigModel, Problem, Vec3, deep_merge, locate_line, model_problems,
                            STOCK_CONFIGS, format_key, read_toml, resolve_inside, suggest)
 from engine.registry import BuildContext, Registry, RegistryError
 from engine.script import Scripts, make_slot
@@ -77,12 +78,19 @@ class RenderSettings(ConfigModel):
                                                        "once it was the same two frames running, and copy it back "
                                                        "instead of redrawing it while the camera, the light and "
                                                        "those features stay unchanged; the picture is the same bits.")
-    sky_top: Vec3 = Field((0.25, 0.45, 0.85), description="Sky colour at the zenith (linear RGB).")
-    sky_horizon: Vec3 = Field((0.75, 0.85, 0.95), description="Sky colour at the horizon (linear RGB).")
-    sun_direction: Vec3 = Field((0.4, 0.8, 0.3), description="Direction towards the sun.")
-    sun_color: Vec3 = Field((1.0, 0.95, 0.85), description="Sun colour and intensity.")
+    sky_top: Color3 = Field((0.25, 0.45, 0.85), description="Sky colour at the zenith (linear RGB).")
+    sky_horizon: Color3 = Field((0.75, 0.85, 0.95), description="Sky colour at the horizon (linear RGB).")
+    sun_direction: Vec3 = Field((0.4, 0.8, 0.3), description="Direction towards the sun (any length but zero).")
+    sun_color: Color3 = Field((1.0, 0.95, 0.85), description="Sun colour and intensity (linear RGB).")
     ambient: float = Field(0.35, ge=0.0, le=4.0, description="Ambient light intensity.")
     fog_density: float = Field(0.004, ge=0.0, le=1.0, description="Exponential distance fog per metre.")
+    @field_validator("sun_direction")
+    @classmethod
+    def _sun_nonzero(cls, direction: tuple[float, ...]) -> tuple[float, ...]:
+        if math.sqrt(sum(x * x for x in direction)) < 1e-9:
+            raise ValueError("expected a non-zero direction (the sun's light comes from it)")
+        return direction
+
     vsync: bool = Field(True, description="In a window, wait for the display's refresh between frames.")
 
 

@@ -7,7 +7,7 @@ Nothing here imports GL: the renderer is created by the front end (window or hea
 from __future__ import annotations
 
 from engine.registry import Registry
-from engine.config import validate
+from engine.config import Problem, format_key, locate_line, suggest, validate
 from engine.render.components import Camera, CameraConfig, Hud, MeshConfig, build_camera, camera_controllers
 from engine.schedule import Stage
 from engine.world import World
@@ -76,6 +76,32 @@ def _camera_command(world: World, entity: int, camera: int | None = None, **valu
     return config
 
 
+BUILTIN_FEATURES = ("sky", "terrain", "meshes", "hud")  # engine.render.passes.builtin_features' names (no GL here)
+
+
+def _hidden_feature_check(registry: Registry):
+    """A scene check: every name in a Camera's ``hide_features`` is a render feature some plugin registered
+    (a typo hides nothing, silently, otherwise); warnings, with the nearest name."""
+
+    def check(plan, text: str) -> list[Problem]:
+        known = sorted(set(BUILTIN_FEATURES) | set(registry.render_feature_names))
+        found = []
+        for i, ent in enumerate(plan.entities):
+            for cname, cfg in ent.components:
+                if cname != "Camera":
+                    continue
+                for j, feature in enumerate(cfg.hide_features):
+                    if feature not in known:
+                        key = ("entities", i, "components", "Camera", "hide_features", j)
+                        found.append(Problem(str(plan.file), format_key(key),
+                                             f"no render feature is called '{feature}' (known: {', '.join(known)}); "
+                                             f"it hides nothing", feature, suggest(feature, known),
+                                             locate_line(text, key[:-1])))
+        return found
+
+    return check
+
+
 class RenderPlugin:
     name = "render"
 
@@ -89,6 +115,7 @@ class RenderPlugin:
         registry.add_command("render.hud", _set_hud)
         registry.add_command("render.camera", _camera_command)
         registry.on_world(lambda world: world.insert_resource(Hud()))
+        registry.add_scene_check(_hidden_feature_check(registry))
 
 
 plugin = RenderPlugin()

@@ -215,8 +215,8 @@ class _Plugin:
         registry.add_command("dust_devil.drag", drag_command)
         registry.add_command("dust_devil.pick_drag", pick_drag_command)
         registry.add_command("dust_devil.screen_drag", screen_drag_command)
-        registry.add_render_feature(_markers_feature)  # GL is imported only when a renderer asks
-        registry.add_render_feature(_particles_feature)
+        registry.add_render_feature(_markers_feature, "dust_devil_markers")  # GL is imported only when a renderer asks
+        registry.add_render_feature(_particles_feature, "dust_devil")
 
 
 plugin = _Plugin()

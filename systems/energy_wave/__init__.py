@@ -116,7 +116,7 @@ class _Plugin:
         registry.add_command("energy_wave.set_pattern", set_pattern)
         registry.add_command("energy_wave.configure", configure)
         registry.add_script(PatternCycle)
-        registry.add_render_feature(_make_feature)
+        registry.add_render_feature(_make_feature, "energy_wave")
 
 
 plugin = _Plugin()

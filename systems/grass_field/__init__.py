@@ -83,7 +83,7 @@ class _Plugin:
         registry.add_scene_check(check_level_zero_load)
         registry.add_command("grass_field.set_max_level", set_max_level)
         registry.add_command("grass_field.set_debug_levels", set_debug_levels)
-        registry.add_render_feature(_feature)  # GL is imported only when a renderer asks
+        registry.add_render_feature(_feature, "grass_field")  # GL is imported only when a renderer asks
 
 
 plugin = _Plugin()

@@ -66,7 +66,7 @@ class ToonSmokePlugin:
         registry.add_command("toon_smoke.set_source", set_source)
         registry.add_command("toon_smoke.puff", puff)
         registry.add_scripts(SCRIPTS)
-        registry.add_render_feature(_make_feature)
+        registry.add_render_feature(_make_feature, "toon_smoke")
 
 
 plugin = ToonSmokePlugin()

@@ -70,7 +70,7 @@ class WaterSurfacePlugin:
             registry.add_command(name, fn)
         registry.add_scripts(api.SCRIPTS)
         registry.on_world(simulate.setup_world)
-        registry.add_render_feature(_make_feature)
+        registry.add_render_feature(_make_feature, "water_surface")
 
 
 def _make_feature(renderer):

@@ -66,6 +66,12 @@ CASES = [
      "pixels a frame exceeds"),
     ("DustDevil", "particle_count = 200000\nsubsteps = 8\nprewarm_time = 60.0", "prewarm_time", None,
      "particle steps before the first frame exceeds 100000000"),
+    # subnormal numbers pass gt=0 bounds and overflow their reciprocals (a fuzzing review: mass crashed a tick)
+    ("RigidBody", "mass = 1e-320", "mass", 1e-320, "subnormal number"),
+    ("EnergyWaveEmitter", "beam_speed = 5e-324", "beam_speed", 5e-324, "subnormal number"),
+    ("ToonSmokeVolume", "noise_scale = 5e-324", "noise_scale", 5e-324, "subnormal number"),
+    ("Terrain", "spacing = 1e-320", "spacing", 1e-320, "subnormal number"),
+    ("Transform", "position = [0.0, -5e-324, 0.0]", "position", [0.0, -5e-324, 0.0], "subnormal number"),
 ]
 
 
