@@ -8,9 +8,11 @@ import logging
 import os
 import sys
 import traceback
+from collections.abc import Sequence
 from pathlib import Path
 
 from engine.config import ConfigError, Problem, read_toml, validate
+from engine.plugin_option import NamedPlugin, PluginOptionError, load_plugins, registry_with
 from engine.registry import Registry, RegistryError, default_registry
 from engine.script import ScriptError
 from engine.state import StateHashError
@@ -27,6 +29,13 @@ def _int_in(low: int, high: int):
 
     parse.__name__ = f"whole number in [{low}, {high}]"
     return parse
+
+
+def _add_plugin_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--plugin", action="append", default=[], metavar="MODULE[:ATTR]",
+                        help="also install this plugin, importable from the current directory (repeatable); "
+                             "ATTR defaults to the module's 'plugin', else the one plugin it defines; a class is "
+                             "instantiated (docs/extending.md)")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -48,9 +57,11 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument("--screenshot-every", nargs=2, metavar=("N", "DIR"), help="write every N-th frame to DIR")
     run.add_argument("--profile", action="store_true", help="print per-pass timings at exit")
     run.add_argument("--size", nargs=2, type=_int_in(16, 8192), metavar=("W", "H"), help="override the render size")
+    _add_plugin_option(run)
 
     val = sub.add_parser("validate", help="validate scenes and presets")
     val.add_argument("paths", nargs="+", type=Path)
+    _add_plugin_option(val)
 
     sch = sub.add_parser("schema", help="write a JSON Schema per registered component")
     sch.add_argument("--out", type=Path, required=True)
@@ -68,6 +79,7 @@ def main(argv: list[str] | None = None) -> int:
     gr.add_argument("scene")
     gr.add_argument("--dot", action="store_true", help="Graphviz format (culled passes dashed)")
     gr.add_argument("--out", type=Path, help="write to a file instead of stdout")
+    _add_plugin_option(gr)
 
     warm = sub.add_parser("warm", help="compile the kernels the scenes use, in parallel processes (first run)")
     warm.add_argument("scenes", nargs="+", type=Path)
@@ -83,7 +95,7 @@ def main(argv: list[str] | None = None) -> int:
 
             return run_command(args)
         if args.command == "validate":
-            return validate_command(args.paths)
+            return validate_command(args.paths, load_plugins(args.plugin))
         if args.command == "schema":
             return schema_command(args.out)
         if args.command == "docs":
@@ -106,6 +118,11 @@ def main(argv: list[str] | None = None) -> int:
             return graph_command(args)
     except ConfigError as exc:
         print(exc, file=sys.stderr)
+        return 1
+    except PluginOptionError as exc:  # a --plugin value naming no usable plugin: one line (the cause on request)
+        if os.environ.get("ECSFX_TRACEBACK") and exc.__cause__ is not None:
+            raise
+        print(f"error: {exc}", file=sys.stderr)
         return 1
     except StateHashError as exc:  # a script or plugin keeping something that is not state: theirs to fix
         print(f"error: {exc}", file=sys.stderr)
@@ -150,10 +167,11 @@ def _toml_files(paths: list[Path]) -> tuple[list[Path], list[Problem]]:
     return files, problems
 
 
-def validate_file(path: Path, registry: Registry):
+def validate_file(path: Path, registry: Registry, plugins: Sequence[NamedPlugin] = ()):
     """Validate one TOML file: a scene, a prefab, or a preset under ``effects/<dir>/``.
 
-    Returns what it validated (a ScenePlan, a prefab's EntityPlan or the preset's config model); raises
+    A scene that lists ``[scene] plugins`` is checked with those plugins and ``plugins`` (``--plugin``), as it
+    runs.  Returns what it validated (a ScenePlan, a prefab's EntityPlan or the preset's config model); raises
     ConfigError listing every problem.
     """
     from engine.scene import plan_scene
@@ -170,26 +188,26 @@ def validate_file(path: Path, registry: Registry):
                                                       f"'{path.parent.name}/'")])
         return validate(spec.model, data, str(path), (), text, context={"configs_root": path.parent.parent.parent})
     elif "entities" in data or "scene" in data or path.parent.name == "scenes":
-        plugins = data.get("scene", {}).get("plugins") if isinstance(data.get("scene"), dict) else None
-        if isinstance(plugins, list) and all(isinstance(p, str) for p in plugins):
+        scene_plugins = data.get("scene", {}).get("plugins") if isinstance(data.get("scene"), dict) else None
+        if isinstance(scene_plugins, list) and all(isinstance(p, str) for p in scene_plugins):
             try:  # the scene's own plugins, as App loads it: a component of a plugin it does not list is unknown
-                registry = default_registry(plugins)
+                registry = registry_with(plugins, scene_plugins)
             except RegistryError as exc:
-                raise ConfigError([Problem(str(path), "scene.plugins", str(exc), plugins)]) from None
+                raise ConfigError([Problem(str(path), "scene.plugins", str(exc), scene_plugins)]) from None
         return plan_scene(path, registry)
     else:
         raise ConfigError([Problem(str(path), "", "neither a scene (with [scene] or [[entities]]) nor a preset "
                                                   "under effects/<name>/")])
 
 
-def validate_command(paths: list[Path]) -> int:
-    registry = default_registry()
+def validate_command(paths: list[Path], plugins: Sequence[NamedPlugin] = ()) -> int:
+    registry = registry_with(plugins) if plugins else default_registry()
     files, problems = _toml_files(paths)
     failed = 0
     warnings = []
     for path in files:
         try:
-            result = validate_file(path, registry)
+            result = validate_file(path, registry, plugins)
         except ConfigError as exc:
             problems.extend(exc.problems)
             failed += 1

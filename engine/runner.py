@@ -49,7 +49,7 @@ def run_command(args: argparse.Namespace) -> int:
         if isinstance(recorded, str) and Path(recorded).name != Path(args.scene).name:
             log.warning("%s was recorded in %s, not %s: the replay will not reproduce that run", args.replay,
                         recorded, args.scene)
-    app = App(args.scene, seed=seed, strict=args.strict)
+    app = App(args.scene, registry=_plugin_registry(args), seed=seed, strict=args.strict)
     if args.print_schedule:
         print(app.schedule.describe(app.clock.dt))
         return 0
@@ -80,6 +80,13 @@ def run_command(args: argparse.Namespace) -> int:
     return 0
 
 
+def _plugin_registry(args: argparse.Namespace):
+    """The registry of the scene's plugins and the ``--plugin`` ones; None without ``--plugin`` (App builds it)."""
+    from engine.plugin_option import load_plugins, scene_registry
+
+    return scene_registry(args.scene, load_plugins(getattr(args, "plugin", None)))
+
+
 def replay_seed(path: Path, meta: dict, asked: int | None) -> int | None:
     """The seed a replay runs with: the recording's (its header's ``seed``), so that it reproduces the recorded
     run; ``--seed`` may repeat it but not contradict it (the run would not be the one recorded)."""
@@ -99,7 +106,7 @@ def replay_seed(path: Path, meta: dict, asked: int | None) -> int | None:
 def graph_command(args: argparse.Namespace) -> int:
     from engine.render.frontend import compiled_graph_dot
 
-    text = compiled_graph_dot(args.scene, dot=args.dot)
+    text = compiled_graph_dot(args.scene, dot=args.dot, registry=_plugin_registry(args))
     if args.out:
         args.out.write_text(text, encoding="utf-8")
     else:

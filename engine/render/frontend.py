@@ -19,6 +19,7 @@ from engine.render.renderer import Renderer
 
 if TYPE_CHECKING:
     from engine.app import App
+    from engine.registry import Registry
 
 log = logging.getLogger("engine.render")
 GL_PACKAGES = "libegl1 libegl-mesa0 libgl1-mesa-dri"
@@ -220,11 +221,12 @@ def attach_window_input(window, queue: InputQueue, renderer: Renderer, reloader=
                          on_mouse_release, on_mouse_scroll)
 
 
-def compiled_graph_dot(scene: str, dot: bool = True) -> str:
-    """Build a scene, declare one frame headless and return the compiled graph (Graphviz or a listing)."""
+def compiled_graph_dot(scene: str, dot: bool = True, registry: Registry | None = None) -> str:
+    """Build a scene, declare one frame headless and return the compiled graph (Graphviz or a listing); ``registry``
+    as for ``App`` (None: the scene's plugins)."""
     from engine.app import App
 
-    app = App(scene)
+    app = App(scene, registry=registry)
     renderer = headless_renderer(app, 320, 180)
     app.step(1)
     renderer.extract(app.world)
