@@ -210,8 +210,8 @@ def _unknown(kind: str, name: str, known: Iterable[str]) -> RegistryError:
     how = ""
     if kind in ("script", "command") and not close:  # likely one of the game's own, not registered yet
         how = (f"; a {kind} is registered by a plugin's build(registry) (registry.add_{kind}), and a plugin is "
-               f"found through the '{ENTRY_POINT_GROUP}' entry points of an installed package (docs/modding.md, "
-               "section 3)")
+               f"found through the '{ENTRY_POINT_GROUP}' entry points of an installed package, or given with "
+               "registry.install(plugin) or the command line's --plugin MODULE (docs/extending.md)")
     return RegistryError(f"{problem}{hint} (registered: {', '.join(sorted(known)) or 'none'}){how}", problem, close)
 
 
