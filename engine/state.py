@@ -13,6 +13,7 @@ import copy
 import dataclasses
 import hashlib
 import struct
+import threading
 from enum import Enum
 from typing import TYPE_CHECKING, Any
 
@@ -21,6 +22,9 @@ from pydantic import BaseModel
 
 if TYPE_CHECKING:
     from engine.world import World
+
+
+_ACTIVE = threading.local()  # ids of the plain objects on the hashing stack: a cycle is an error, not a RecursionError
 
 
 def _feed(h: Any, obj: Any) -> None:
@@ -88,8 +92,15 @@ def _feed(h: Any, obj: Any) -> None:
     elif isinstance(obj, (set, frozenset)):
         _feed(h, sorted(obj, key=lambda k: (type(k).__name__, repr(k))))
     elif hasattr(obj, "__dict__"):
-        h.update(f"o:{type(obj).__qualname__}|".encode())
-        _feed(h, vars(obj))
+        active = _ACTIVE.__dict__.setdefault("ids", set())  # plain objects being hashed, outermost first
+        if id(obj) in active:  # e.g. a script keeping the world, whose resources hold the app, which holds the world
+            raise StateHashError(f"{type(obj).__qualname__} (it contains itself)")
+        active.add(id(obj))
+        try:
+            h.update(f"o:{type(obj).__qualname__}|".encode())
+            _feed(h, vars(obj))
+        finally:
+            active.discard(id(obj))
     else:
         raise StateHashError(type(obj).__qualname__)
 

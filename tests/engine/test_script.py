@@ -246,6 +246,32 @@ def test_a_script_keeping_something_that_is_not_state_is_named_when_hashing(tmp_
     assert "__hash_state__" in text
 
 
+def test_a_script_keeping_the_world_is_a_state_hash_error_not_a_recursion_error(tmp_path):
+    """The world refers to itself (its command buffer): hashing it alone was a RecursionError with no path; now the
+    cycle is named. Kept by a script, the error names the script's attribute."""
+    from engine.state import StateHashError, digest
+    from engine.world import World
+
+    @script("test.keeps_the_world")
+    class KeepsTheWorld(Script):
+        def on_start(self) -> None:
+            self.kept = self.ctx.world
+
+    reg = default_registry()
+    reg.add_script(KeepsTheWorld)
+    scene = tmp_path / "s.toml"
+    scene.write_text("[[entities]]\nname = 'hero'\nscripts = [{ name = 'test.keeps_the_world' }]\n")
+    app = App(scene, registry=reg, strict=True)
+    app.step(1)
+    with pytest.raises(StateHashError) as err:
+        app.state_hash()
+    assert "(KeepsTheWorld).kept" in str(err.value)
+    with pytest.raises(StateHashError, match="World .it contains itself."):
+        digest(World(0))
+    app.step(1)  # the failed hash left nothing behind: hashing state without the cycle works again
+    assert len(digest({"a": [1.0, 2.0]})) == 32
+
+
 def test_commands_name_other_entities_by_id_or_name_and_bad_arguments_say_what_the_command_takes(tmp_path):
     """Every command that acts on another entity takes its id or its scene name (rigid_body.apply_impulse took
     only an int: target="crate" was int('crate')); a wrong keyword names the command and its parameters; a
