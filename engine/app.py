@@ -68,6 +68,7 @@ class App:
             for warning in self.plan.warnings:
                 log.warning("%s", warning)
         self.seed = int(self.config.scene.seed if seed is None else seed)
+        self.seed_from_scene = seed is None  # hot reload: a [scene] seed edit then applies on restart (R)
         self.strict = strict
         self.schedule = self.registry.schedule
         self.clock = FixedClock(self.config.scene.fixed_dt, self.config.scene.max_catchup_steps)

@@ -9,17 +9,38 @@ touch without a change does nothing).  On a change it re-plans the whole scene:
   swapped in place (its ``structural`` keys unchanged: the new parameters are live at the next tick and
   the simulation state is kept) or rebuilt alone; script parameters are swapped in place; entities
   added to or removed from the file are spawned or despawned.
+
+The scene's settings (``[scene]``, ``[render]``) on reload:
+
+* ``fixed_dt`` and ``max_catchup_steps`` are live (the clock takes them).  The new plan is validated at the new
+  ``fixed_dt``, and so are the components of entities spawned while running (prefabs, spawners): a step that one
+  of them cannot run at (an unstable water surface) refuses the whole edit, so no system raises on the next tick;
+* ``seed``: a running world keeps its random streams; the new seed applies on restart (R), and the HUD says so;
+* ``plugins``: systems and render passes cannot be swapped into a running game, so a changed list holds the
+  whole edit back and says to run the game again (R rebuilds the scene with the plugins already loaded);
+* ``[render]`` is live (the renderer reads the new settings the next frame) except ``width``, ``height`` (the
+  window's size) and ``vsync`` (set when the window opens), which keep their running values and are noted.
+
+A watched file that goes from content to zero bytes is taken for an editor's save in progress: the reload is
+held back (a scene that suddenly has no entities would despawn the whole world and respawn it from scratch)
+and the HUD says so until the file is saved again.  A failed reload also watches the files that the failed
+scene names but could not read: creating a missing preset or asset, or fixing a broken one, reloads.
 """
 
 from __future__ import annotations
 
 import hashlib
 import logging
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from engine.config import ConfigError
+import numpy as np
+from pydantic import ValidationError
+
+from engine.config import (STOCK_CONFIGS, ConfigError, Problem, locate_line, read_toml, resolve_asset,
+                           resolve_inside)
 from engine.scene import EntityRecord, build_component, build_problem, plan_scene, spawn_entity
 from engine.script import Scripts, make_slot
 
@@ -47,6 +68,10 @@ def _fingerprint(path: Path) -> tuple:
         return (None, None, None)
 
 
+RUN_AGAIN_RENDER_KEYS = ("width", "height", "vsync")  # [render] keys the window takes when it opens
+MAX_WATCHED_ASSETS = 64  # files a failed scene names that a reload also watches (each poll reads them)
+
+
 class HotReloader:
     """Watches an app's scene and presets and applies edits to the live world."""
 
@@ -56,6 +81,9 @@ class HotReloader:
         self.app = app
         self.status = ReloadStatus(warnings=[str(w) for w in app.warnings])
         app.world.insert_resource(self.status)
+        self._world = app.world
+        self._started = app.plan.config  # the file's settings when the game started (window size, vsync, seed)
+        self._held: set[Path] = set()  # emptied files (a save in progress?) whose reload is held back
         self._prints: dict[Path, tuple] = {}
         self._watch(app.plan.files)
 
@@ -72,6 +100,7 @@ class HotReloader:
 
     def poll(self) -> bool:
         """Reload when a watched file's content changed; returns True when a reload was attempted."""
+        self._follow_restart()
         if not self.changed():
             return False
         self.reload()
@@ -80,29 +109,236 @@ class HotReloader:
     def reload(self) -> bool:
         """Re-plan and apply (F5 calls this directly). Returns True when the new config is in force."""
         app = self.app
+        self._follow_restart()
+        emptied = self._emptied()
+        if emptied:
+            return self._refuse([Problem(str(path), "", "the file is empty, as an editor leaves it part-way through "
+                                         "a save: the running world stays; save the file again to apply it (a file "
+                                         "meant to be empty needs at least a comment)") for path in emptied],
+                                hold=emptied)
+        plugins = self._plugins_problem()
+        if plugins is not None:
+            return self._refuse([plugins])
         try:
             plan = plan_scene(app.plan.file, app.registry, app.plan.configs_root)
         except ConfigError as exc:
-            self._watch(list(self._prints))  # do not report the same broken content every poll
-            self.status.errors = [str(p) for p in exc.problems]
-            log.error("reload failed; keeping the last good config:\n%s", exc)
-            return False
+            return self._refuse(exc.problems, also_watch=self._named_files())
+        problems = self._time_step_problems(plan)
+        if problems:
+            return self._refuse(problems, also_watch=plan.files)
+        self._held = set()
         self.status.errors = []
-        self.status.warnings = [str(w) for w in plan.warnings]
         for warning in plan.warnings:
             log.warning("%s", warning)
-        try:
-            changes = self._apply(plan)
+        try:  # the settings first: what is spawned or rebuilt below sees the new config and clock
+            changes = self._apply_settings(plan)
+            changes += self._apply(plan)
         except Exception as exc:  # noqa: BLE001 - a plugin's hook failing must not take the game down
             log.error("reload of %s failed while applying", plan.file, exc_info=exc)
             self.status.errors.append(f"{plan.file}: reload failed while applying: {type(exc).__name__}: {exc}")
             changes = ["reload failed while applying; see the errors"]
         self._watch(plan.files)
         app.plan = plan
+        notes = self._notes()
+        for note in notes:
+            log.warning("%s", note)
+        self.status.warnings = [str(w) for w in plan.warnings] + [str(n) for n in notes]
         self.status.reloads += 1
         self.status.last_changes = changes
         log.info("reloaded %s: %s", plan.file, "; ".join(changes) or "no effective change")
         return True
+
+    def _refuse(self, problems: list[Problem], also_watch: Iterable[Path] = (),
+                hold: Iterable[Path] = ()) -> bool:
+        """Keep the last good config and the running world; report ``problems`` until the files change.  The
+        watch list grows by ``also_watch`` (what the failed edit names), so that fixing those files reloads."""
+        self._watch([*self._prints, *also_watch])  # fingerprints now: the same content is not reported every poll
+        self._held = set(hold)
+        self.status.errors = [str(p) for p in problems]
+        log.error("reload failed; keeping the last good config:\n%s", ConfigError(problems))
+        return False
+
+    def _follow_restart(self) -> None:
+        """A restart (R) builds a new world: the status moves to it, and the notes that the restart settled go."""
+        app = self.app
+        if app.world is self._world:
+            return
+        self._world = app.world
+        app.world.insert_resource(self.status)
+        self.status.warnings = [str(w) for w in app.warnings] + [str(n) for n in self._notes()]
+
+    # ------------------------------------------------------------- what a reload may not apply
+    def _emptied(self) -> list[Path]:
+        """Watched files that had content and now have none (an editor truncates before it writes)."""
+        found = []
+        for path, (size, _, _) in self._prints.items():
+            try:
+                now = path.stat().st_size
+            except OSError:
+                continue
+            if now == 0 and (size or path in self._held):
+                found.append(path)
+        return found
+
+    def _plugins_problem(self) -> Problem | None:
+        """A changed ``[scene] plugins`` list: its systems cannot join a running schedule (nor its render passes
+        a running renderer), and planning with the running registry would call its components unknown."""
+        app = self.app
+        try:
+            data, text = read_toml(app.plan.file)
+        except ConfigError:
+            return None  # plan_scene reports it
+        scene = data.get("scene")
+        wanted = scene.get("plugins") if isinstance(scene, dict) else None
+        if not (wanted is None or (isinstance(wanted, list) and all(isinstance(n, str) for n in wanted))):
+            return None  # not a list of names: plan_scene reports it
+        running = app.config.scene.plugins
+        if wanted == running:
+            return None
+
+        def shown(names: list[str] | None) -> str:
+            return "every installed plugin" if names is None else "[" + ", ".join(names) + "]"
+
+        return Problem(str(app.plan.file), "scene.plugins",
+                       f"plugins changed from {shown(running)} to {shown(wanted)}: plugins load when the game starts, "
+                       "so run it again to load them (restart, R, rebuilds the scene with the plugins already "
+                       "loaded); until then the running world and the last good config stay in force",
+                       line=locate_line(text, ("scene", "plugins")))
+
+    def _time_step_problems(self, plan) -> list[Problem]:
+        """A new ``fixed_dt`` against the entities spawned while running (prefabs, spawners): plan_scene
+        validated the scene's own at the new step, these were validated at the old one.  A component whose
+        config passes at the old step and fails at the new one (a water surface's stability limit) refuses the
+        edit: applied, its system would raise on the next tick."""
+        from engine.builtin import Name
+
+        app, world = self.app, self.app.world
+        new_dt, old_dt = plan.config.scene.fixed_dt, app.clock.dt
+        if new_dt == old_dt:
+            return []
+        in_scene = {record.entity for record in app.records}
+        seen: set[tuple[int, type]] = set()
+        problems = []
+        line = locate_line(_text(plan.file), ("scene", "fixed_dt"))
+        for cname, spec in app.registry.components.items():
+            for entity, (cfg,) in world.query(spec.model):
+                if entity in in_scene or (entity, spec.model) in seen:
+                    continue
+                seen.add((entity, spec.model))
+                reason = _unsuited(spec.model, cfg, old_dt, new_dt)
+                if reason is not None:
+                    name = world.try_get(entity, Name)
+                    label = f"entity {entity}" + (f" '{name.value}'" if name is not None else "")
+                    problems.append(Problem(str(plan.file), "scene.fixed_dt",
+                                            f"{label}, spawned while running, cannot run at this step: {cname}: "
+                                            f"{reason}; the running world keeps fixed_dt {old_dt:g} s",
+                                            value=new_dt, line=line))
+        return problems
+
+    def _named_files(self) -> list[Path]:
+        """The files a scene that failed to load names: its presets where engine.scene looks for them (found or
+        not), and the strings in its component tables and their presets that name a file under the configs root
+        (a texture, a height map).  Watched until the next reload, so creating or fixing one reloads."""
+        app = self.app
+        root = app.plan.configs_root
+        try:
+            data, _ = read_toml(app.plan.file)
+        except ConfigError:
+            return []
+        files: list[Path] = []
+        assets: list[Path] = []
+        entities = data.get("entities")
+        for raw in entities if isinstance(entities, list) else ():
+            components = raw.get("components") if isinstance(raw, dict) else None
+            for cname, values in components.items() if isinstance(components, dict) else ():
+                if not isinstance(values, dict):
+                    continue
+                tables = [values]
+                for preset in self._preset_paths(cname, values.get("preset"), root):
+                    files.append(preset)
+                    try:
+                        tables.append(read_toml(preset)[0])
+                    except ConfigError:
+                        pass
+                for table in tables:
+                    assets.extend(_asset_paths(table, root))
+        return files + list(dict.fromkeys(assets))[:MAX_WATCHED_ASSETS]
+
+    def _preset_paths(self, cname: str, name: Any, root: Path) -> list[Path]:
+        """Where engine.scene looks for preset ``name`` of component ``cname``: the game's configs, then the
+        engine's stock ones."""
+        if not isinstance(name, str):
+            return []
+        if "/" not in name:
+            spec = self.app.registry.components.get(cname)
+            if spec is None or spec.preset_dir is None:
+                return []
+            name = f"{spec.preset_dir}/{name}"
+        paths = []
+        for base in (Path(root) / "effects", STOCK_CONFIGS / "effects"):
+            try:
+                paths.append(resolve_inside(base, name, ".toml"))
+            except ValueError:
+                pass
+        return paths
+
+    # ------------------------------------------------------------------ settings
+    def _apply_settings(self, plan) -> list[str]:
+        """Bring the clock, the app's config and the renderer to the plan's ``[scene]`` and ``[render]``."""
+        app = self.app
+        before, new = app.plan.config, plan.config  # the file as it was and as it is
+        changes = []
+        clock = app.clock
+        if new.scene.fixed_dt != clock.dt:
+            changes.append(f"scene: fixed_dt {clock.dt:g} -> {new.scene.fixed_dt:g} s")
+            clock.dt = float(new.scene.fixed_dt)
+            clock.accumulator = min(clock.accumulator, clock.dt * (1.0 - 1e-12))  # less than one step waits
+        if new.scene.max_catchup_steps != clock.max_steps:
+            changes.append(f"scene: max_catchup_steps {clock.max_steps} -> {new.scene.max_catchup_steps}")
+            clock.max_steps = int(new.scene.max_catchup_steps)
+        if new.scene.seed != before.scene.seed:
+            if app.seed_from_scene:
+                app.seed = int(new.scene.seed)
+                changes.append(f"scene: seed {before.scene.seed} -> {new.scene.seed}, applies on restart (R)")
+            else:
+                changes.append(f"scene: seed {new.scene.seed} not used: this run's seed {app.seed} was given when "
+                               "it started")
+        running = app.config.render
+        render = new.render.model_copy(update={k: getattr(running, k) for k in RUN_AGAIN_RENDER_KEYS})
+        live = _diff(running, render)
+        waiting = [k for k in RUN_AGAIN_RENDER_KEYS if getattr(new.render, k) != getattr(before.render, k)]
+        app.config = new.model_copy(update={"render": render})
+        if live:
+            if app.renderer is not None:
+                _point_renderer_at(app.renderer, render)
+            changes.append(f"render: {', '.join(live)} updated")
+        if waiting:
+            changes.append(f"render: {', '.join(waiting)} apply when the game is run again")
+        return changes
+
+    def _notes(self) -> list[Problem]:
+        """What the file asks for that the running game does not do yet (shown with the warnings until done)."""
+        app = self.app
+        wanted, started = app.plan.config, self._started
+        text = _text(app.plan.file)
+        notes = []
+
+        def note(key: str, message: str, value: Any) -> None:
+            notes.append(Problem(str(app.plan.file), key, message, value, line=locate_line(text, key.split("."))))
+
+        seed = wanted.scene.seed
+        if app.seed_from_scene and seed != app.world.seed:
+            note("scene.seed", f"applies on restart (R); the running world keeps seed {app.world.seed}", seed)
+        elif not app.seed_from_scene and seed != started.scene.seed:
+            note("scene.seed", f"not used: this run's seed {app.seed} was given when it started", seed)
+        for key in ("width", "height"):
+            if getattr(wanted.render, key) != getattr(started.render, key):
+                note(f"render.{key}", "the window's size is not reloaded: resize the window, or run the game again",
+                     getattr(wanted.render, key))
+        if wanted.render.vsync != started.render.vsync:
+            note("render.vsync", "set when the window opens: applies when the game is run again",
+                 wanted.render.vsync)
+        return notes
 
     # ----------------------------------------------------------------- applying
     def _apply(self, plan) -> list[str]:
@@ -248,3 +484,60 @@ class HotReloader:
 def _diff(old: Any, new: Any) -> list[str]:
     fields = type(new).model_fields if hasattr(type(new), "model_fields") else {}
     return [k for k in fields if getattr(old, k, None) != getattr(new, k, None)]
+
+
+def _text(path: Path) -> str:
+    try:
+        return Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError):
+        return ""
+
+
+def _unsuited(model: type, cfg: Any, old_dt: float, new_dt: float) -> str | None:
+    """Why ``cfg`` fails validation at ``new_dt`` while it passes at ``old_dt`` (None when it passes at both, or
+    when it does not survive the round trip through a dict at all: then nothing is known about the step)."""
+    try:
+        data = cfg.model_dump()
+    except Exception:  # noqa: BLE001 - not a pydantic model after all
+        return None
+
+    def problem(dt: float) -> str | None:
+        try:
+            model.model_validate(data, context={"fixed_dt": dt})
+        except ValidationError as exc:
+            return "; ".join(str(error.get("msg", "")) for error in exc.errors())
+        except Exception as exc:  # noqa: BLE001 - a validator raising something else is a failure too
+            return f"{type(exc).__name__}: {exc}"
+        return None
+
+    return problem(new_dt) if problem(old_dt) is None else None
+
+
+def _asset_paths(table: Any, root: Path) -> list[Path]:
+    """The strings in ``table`` (nested tables and arrays too) that name a file under the configs root, as
+    engine.config.resolve_asset finds it (a texture, a height map): those with a file suffix."""
+    found = []
+    stack = [table]
+    while stack:
+        value = stack.pop()
+        if isinstance(value, dict):
+            stack.extend(value.values())
+        elif isinstance(value, list):
+            stack.extend(value)
+        elif isinstance(value, str) and len(value) < 512 and Path(value).suffix:
+            try:
+                found.append(resolve_asset(root, value))
+            except (ValueError, OSError):
+                pass
+    return found
+
+
+def _point_renderer_at(renderer: Any, settings: Any) -> None:
+    """Give a renderer new ``[render]`` settings: it reads them every frame, except the light that its
+    constructor derives from them (engine/render/renderer.py, Renderer.__init__), derived again here."""
+    renderer.settings = settings
+    direction = np.asarray(settings.sun_direction, np.float64)
+    norm = np.linalg.norm(direction)
+    renderer.sun_direction = (direction / norm if norm > 0 else direction).astype(np.float32)
+    renderer.sun_color = np.array(settings.sun_color, np.float32)
+    renderer.ambient = float(settings.ambient)

@@ -218,6 +218,19 @@ def test_water_surface_parameters_live_and_resolution_rebuilds(tmp_path):
     s.app.step(1)
 
 
+def test_water_surface_fixed_dt_edit_runs_at_the_step_it_was_validated_at(tmp_path):
+    s = Scene(tmp_path, ["water_surface"], water())
+    s.app.step(5)
+    state = s.get(WaterState)
+    s.header += "fixed_dt = 0.001\n"  # wave_speed 150 m/s is stable at 1/1000 s, not at 1/60 s
+    changes = s.rewrite(water(speed=150.0))
+    assert s.app.dt == 0.001 and s.get(WaterState) is state
+    assert any("fixed_dt" in c for c in changes) and any("parameters updated (wave_speed)" in c for c in changes)
+    s.app.step(5)  # the old reload kept 1/60 s: the stability check raised CrossFieldError here, every tick
+    assert np.isfinite(state.heights).all()
+    assert state.coefficient_k == pytest.approx((150.0 * 0.001 / 0.5) ** 2)
+
+
 def test_rigid_body_parameters_live_collider_follows_and_velocity_rebuilds(tmp_path):
     s = Scene(tmp_path, ["water_surface"], water())
     s.app.step(3)
