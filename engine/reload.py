@@ -39,6 +39,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from pydantic import ValidationError
 
+from engine import exact
 from engine.config import (STOCK_CONFIGS, ConfigError, Problem, locate_line, read_toml, resolve_asset,
                            resolve_inside)
 from engine.scene import EntityRecord, build_component, build_problem, plan_scene, spawn_entity
@@ -537,7 +538,7 @@ def _point_renderer_at(renderer: Any, settings: Any) -> None:
     constructor derives from them (engine/render/renderer.py, Renderer.__init__), derived again here."""
     renderer.settings = settings
     direction = np.asarray(settings.sun_direction, np.float64)
-    norm = np.linalg.norm(direction)
+    norm = float(exact.length(direction))  # as Renderer.__init__ does, without BLAS (test_state_math.py)
     renderer.sun_direction = (direction / norm if norm > 0 else direction).astype(np.float32)
     renderer.sun_color = np.array(settings.sun_color, np.float32)
     renderer.ambient = float(settings.ambient)
