@@ -235,7 +235,9 @@ class GrassFieldConfig(ConfigModel):
                                  f"level-3 dots every dot_spacing_pixels · length_of_interest / level_thresholds[2] = "
                              f"{spacing:.3g} world units along stems up to {longest:.3g} long make "
                              f"{longest / spacing:.0f} dots per stem, more than {MAX_DOTS_PER_LINE}; raise "
-                             "length_of_interest or dot_spacing_pixels, or lower level_thresholds[2]")
+                             "length_of_interest or dot_spacing_pixels, or lower level_thresholds[2], or make the "
+                             "stems shorter (base_length, base_length_jitter, branch_segments, "
+                             "branch_segments_jitter, branch_length_ratio)")
         return self
 
     @property
