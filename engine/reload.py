@@ -86,18 +86,37 @@ class HotReloader:
         self._started = app.plan.config  # the file's settings when the game started (window size, vsync, seed)
         self._held: set[Path] = set()  # emptied files (a save in progress?) whose reload is held back
         self._prints: dict[Path, tuple] = {}
-        self._watch(app.plan.files)
+        self._assets_changed: set[Path] = set()  # asset files whose content changed since the last reload
+        self._watch(app.plan.files + self._plan_assets(app.plan))
 
     def _watch(self, files: list[Path]) -> None:
         self._prints = {Path(f): _fingerprint(Path(f)) for f in files}
 
     def changed(self) -> bool:
+        found = False
         for path, old in self._prints.items():
             new = _fingerprint(path)
             if new != old and (new[0], new[2]) != (old[0], old[2]):
-                return True
-            self._prints[path] = new  # same content, touched: remember the new mtime
-        return False
+                found = True
+                if path.suffix.lower() != ".toml":  # an asset: the components naming it are rebuilt
+                    self._assets_changed.add(path)
+            elif new != old:
+                self._prints[path] = new  # same content, touched: remember the new mtime
+        return found
+
+    def _plan_assets(self, plan) -> list[Path]:
+        """The asset files (height maps, textures) the components of a loaded scene name and that exist: watched,
+        so that editing one rebuilds the components that use it (their config did not change)."""
+        root = plan.configs_root
+        found = [path for ent in plan.entities for _, cfg in ent.components
+                 for path in _asset_paths(cfg.model_dump(mode="json", warnings=False), root) if path.is_file()]
+        return list(dict.fromkeys(found))[:MAX_WATCHED_ASSETS]
+
+    def _uses_changed_asset(self, cfg: Any) -> bool:
+        if not self._assets_changed:
+            return False
+        return any(path in self._assets_changed
+                   for path in _asset_paths(cfg.model_dump(mode="json", warnings=False), self.app.plan.configs_root))
 
     def poll(self) -> bool:
         """Reload when a watched file's content changed; returns True when a reload was attempted."""
@@ -138,7 +157,8 @@ class HotReloader:
             log.error("reload of %s failed while applying", plan.file, exc_info=exc)
             self.status.errors.append(f"{plan.file}: reload failed while applying: {type(exc).__name__}: {exc}")
             changes = ["reload failed while applying; see the errors"]
-        self._watch(plan.files)
+        self._watch(plan.files + self._plan_assets(plan))
+        self._assets_changed = set()
         app.plan = plan
         notes = self._notes()
         for note in notes:
@@ -415,12 +435,13 @@ class HotReloader:
             changes.append(f"{record.name}: removed {cname}")
         for cname, cfg in ent.components:
             old = record.components.get(cname)
-            if old is not None and old[0] == cfg:
+            asset_edited = self._uses_changed_asset(cfg)  # same config, new height map or texture: rebuilt
+            if old is not None and old[0] == cfg and not asset_edited:
                 continue
             spec = registry.component(cname)
             key = f"entities[{index}].components.{cname}"
             try:
-                swapped = old is not None and self._swap_in_place(spec, old, cfg, record.entity)
+                swapped = old is not None and not asset_edited and self._swap_in_place(spec, old, cfg, record.entity)
             except Exception as exc:  # noqa: BLE001 - a live_update hook raised: put the old config back
                 world.add(record.entity, old[0])
                 self.status.errors.append(str(build_problem(plan.file, key, exc)))
@@ -443,7 +464,7 @@ class HotReloader:
             for comp in built:
                 world.add(record.entity, comp)
             record.components[cname] = (cfg, types)
-            changes.append(f"{record.name}.{cname}: rebuilt")
+            changes.append(f"{record.name}.{cname}: rebuilt" + (" (a file it reads changed)" if asset_edited else ""))
         return changes
 
     def _swap_in_place(self, spec, old: tuple[Any, list[type]], cfg: Any, entity: int) -> bool:

@@ -435,3 +435,38 @@ def test_a_scene_file_emptied_by_a_save_in_progress_keeps_the_running_world(tmp_
     assert state_of(app) is state and state.levels[0] == 4.0
     scene.write_text("# nothing here\n")  # a scene meant to be empty says so
     assert reloader.poll() and reloader.status.errors == [] and app.records == []
+
+
+def test_editing_a_height_map_a_running_terrain_reads_rebuilds_that_terrain(tmp_path):
+    """The config names the same file, so nothing in the TOML changed: the file's own edit rebuilds the component
+    that reads it (and a broken save keeps the running terrain until it is fixed)."""
+    from PIL import Image
+
+    from engine.builtin import Terrain
+
+    app, reloader, root = setup(tmp_path)
+    (root / "assets").mkdir()
+    heightmap = root / "assets" / "hills.png"
+    Image.fromarray(np.full((17, 17), 40, np.uint8), "L").save(heightmap)
+    scene = root / "scenes" / "s.toml"
+    scene.write_text(SCENE.format(capacity=4, speed=10.0) + '\n[[entities]]\nname = "ground"\n'
+                     '[entities.components.Terrain]\nheightmap = "assets/hills.png"\n')
+    assert reloader.poll() and reloader.status.errors == []
+    ground = app.records[2].entity
+    before = app.world.get(ground, Terrain).field.heights.copy()
+    pump_levels = state_of(app).levels.copy()
+
+    Image.fromarray(np.tile(np.arange(17, dtype=np.uint8) * 15, (17, 1)), "L").save(heightmap)
+    assert reloader.poll() and reloader.status.errors == []
+    assert "ground.Terrain: rebuilt (a file it reads changed)" in reloader.status.last_changes
+    after = app.world.get(ground, Terrain).field.heights
+    assert after.shape == before.shape and not np.array_equal(after, before)
+    assert np.array_equal(state_of(app).levels, pump_levels)  # nothing else was touched
+
+    heightmap.write_bytes(b"\x89PNG not really")  # a broken save: refused, the terrain stays
+    assert reloader.poll() and "hills.png" in " ".join(reloader.status.errors)
+    assert np.array_equal(app.world.get(ground, Terrain).field.heights, after)
+    Image.fromarray(np.full((17, 17), 200, np.uint8), "L").save(heightmap)
+    assert reloader.poll() and reloader.status.errors == []
+    assert np.allclose(app.world.get(ground, Terrain).field.heights, 200 / 255 * 10.0)  # height_scale 10 m
+    assert not reloader.poll()  # nothing more changed
