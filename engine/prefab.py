@@ -27,9 +27,10 @@ from pydantic import ValidationError
 class PrefabLibrary:
     """Validated prefabs under one configs root, loaded on first use (a non-state resource)."""
 
-    def __init__(self, registry: Registry, root: Path) -> None:
+    def __init__(self, registry: Registry, root: Path, fixed_dt: float | None = None) -> None:
         self.registry = registry
         self.root = Path(root)
+        self.fixed_dt = fixed_dt  # the step prefabs are checked at (a water surface's stability); None: alone
         self._plans: dict[str, EntityPlan] = {}
 
     @classmethod
@@ -39,8 +40,11 @@ class PrefabLibrary:
         if library is None:
             if app.plan is None:
                 raise ConfigError([Problem("<no scene>", "", "prefabs need an app built from a scene file")])
-            library = cls(app.registry, app.plan.configs_root)
+            library = cls(app.registry, app.plan.configs_root, app.dt)
             app.world.insert_resource(library)
+        elif library.fixed_dt != app.dt:  # the step changed (a hot reload): check prefabs again at the new one
+            library.fixed_dt = app.dt
+            library._plans.clear()
         return library
 
     def plan(self, name: str) -> EntityPlan:
@@ -61,8 +65,10 @@ class PrefabLibrary:
             ent = EntityConfig.model_validate(data)
         except ValidationError as exc:
             problems.extend(model_problems(exc, EntityConfig, str(path), (), text))
-        planned, found = plan_entity(self.registry, data, path, text, (), self.root,
-                                     context={"configs_root": self.root})
+        context = {"configs_root": self.root}
+        if self.fixed_dt is not None:
+            context["fixed_dt"] = self.fixed_dt
+        planned, found = plan_entity(self.registry, data, path, text, (), self.root, context=context)
         problems.extend(found)
         if problems:
             raise ConfigError(problems)
