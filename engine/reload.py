@@ -24,7 +24,9 @@ The scene's settings (``[scene]``, ``[render]``) on reload:
 A watched file that goes from content to zero bytes is taken for an editor's save in progress: the reload is
 held back (a scene that suddenly has no entities would despawn the whole world and respawn it from scratch)
 and the HUD says so until the file is saved again.  A failed reload also watches the files that the failed
-scene names but could not read: creating a missing preset or asset, or fixing a broken one, reloads.
+scene names but could not read: creating a missing preset or asset, or fixing a broken one, reloads.  The asset
+files a loaded scene's components read (height maps, textures) are watched too: editing one rebuilds the components
+that name it, although their config is the same.
 """
 
 from __future__ import annotations
@@ -36,10 +38,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
 from pydantic import ValidationError
 
-from engine import exact
 from engine.config import (STOCK_CONFIGS, ConfigError, Problem, locate_line, read_toml, resolve_asset,
                            resolve_inside)
 from engine.scene import EntityRecord, build_component, build_problem, plan_scene, spawn_entity
@@ -331,7 +331,7 @@ class HotReloader:
         app.config = new.model_copy(update={"render": render})
         if live:
             if app.renderer is not None:
-                _point_renderer_at(app.renderer, render)
+                app.renderer.use_settings(render)
             changes.append(f"render: {', '.join(live)} updated")
         if waiting:
             changes.append(f"render: {', '.join(waiting)} apply when the game is run again")
@@ -552,14 +552,3 @@ def _asset_paths(table: Any, root: Path) -> list[Path]:
             except (ValueError, OSError):
                 pass
     return found
-
-
-def _point_renderer_at(renderer: Any, settings: Any) -> None:
-    """Give a renderer new ``[render]`` settings: it reads them every frame, except the light that its
-    constructor derives from them (engine/render/renderer.py, Renderer.__init__), derived again here."""
-    renderer.settings = settings
-    direction = np.asarray(settings.sun_direction, np.float64)
-    norm = float(exact.length(direction))  # as Renderer.__init__ does, without BLAS (test_state_math.py)
-    renderer.sun_direction = (direction / norm if norm > 0 else direction).astype(np.float32)
-    renderer.sun_color = np.array(settings.sun_color, np.float32)
-    renderer.ambient = float(settings.ambient)

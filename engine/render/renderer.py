@@ -198,13 +198,10 @@ class Renderer:
         self.app = app
         self.ctx = ctx
         self.screen = screen
-        self.settings = app.config.render
+        self.use_settings(app.config.render)
         self.width, self.height = int(width), int(height)
         self.time = 0.0
         self.frame_index = 0
-        self.sun_direction = _unit(np.array(self.settings.sun_direction, float)).astype(np.float32)
-        self.sun_color = np.array(self.settings.sun_color, np.float32)
-        self.ambient = float(self.settings.ambient)
         self._programs: dict[tuple, moderngl.Program] = {}
         self._loaded: dict[tuple, moderngl.Program] = {}  # (directory, name, defines)
         self._computes: dict[tuple, moderngl.ComputeShader] = {}  # (directory, name, defines)
@@ -358,6 +355,14 @@ class Renderer:
             self._free_resource(self._final)
         self._final = self.ctx.texture((self.width, self.height), 4)
         self._final_fbo = self.framebuffer(self._final)
+
+    def use_settings(self, settings) -> None:
+        """Draw with ``[render]`` settings (engine.scene.RenderSettings; a hot reload passes the new ones): most
+        are read every frame; the light is derived here."""
+        self.settings = settings
+        self.sun_direction = _unit(np.array(settings.sun_direction, float)).astype(np.float32)
+        self.sun_color = np.array(settings.sun_color, np.float32)
+        self.ambient = float(settings.ambient)
 
     @property
     def render_scale(self) -> float:

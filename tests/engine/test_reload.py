@@ -241,7 +241,6 @@ def test_a_restart_that_cannot_build_the_scene_keeps_the_running_world(tmp_path)
 
 # --------------------------------------------------- scene settings, files a failed edit names, empty saves
 import shutil  # noqa: E402
-from types import SimpleNamespace  # noqa: E402
 
 from engine.config import STOCK_CONFIGS, CrossFieldError  # noqa: E402
 from pydantic import ValidationInfo, model_validator  # noqa: E402
@@ -350,7 +349,9 @@ def test_a_seed_given_when_the_game_started_stays_and_the_edit_is_noted(tmp_path
 def test_render_settings_reach_the_renderer_and_the_window_size_is_noted(tmp_path):
     app, reloader, scene = spring_app(tmp_path)
     settings = app.config.render
-    app.renderer = SimpleNamespace(settings=settings, sun_direction=None, sun_color=None, ambient=None)
+    from tests.render_utils import make_renderer
+
+    make_renderer(app, 32, 20)  # sets app.renderer
     text = SPRING.format(settings="", stiffness=100.0)
     scene.write_text(text + '[render]\nexposure = 2.5\nsun_direction = [0.0, 2.0, 0.0]\nambient = 0.5\n'
                             'width = 1280\nvsync = false\n')
@@ -362,6 +363,8 @@ def test_render_settings_reach_the_renderer_and_the_window_size_is_noted(tmp_pat
     assert app.config.render.width == settings.width and app.config.render.vsync == settings.vsync  # the window's
     assert any("render.width" in w and "not reloaded" in w for w in reloader.status.warnings)
     assert any("render.vsync" in w for w in reloader.status.warnings)
+    renderer.release()
+    app.renderer = None
 
 
 def test_a_changed_plugin_list_is_reported_at_scene_plugins_and_the_world_kept(tmp_path):
