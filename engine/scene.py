@@ -78,6 +78,27 @@ class RenderSettings(ConfigModel):
                                                        "once it was the same two frames running, and copy it back "
                                                        "instead of redrawing it while the camera, the light and "
                                                        "those features stay unchanged; the picture is the same bits.")
+    shadows: bool = Field(True, description="Sun shadows: the casters (lit meshes, and plugin features that "
+                                            "draw into it) are drawn into a depth map seen from the sun, fitted to "
+                                            "each view's first shadow_distance metres; the terrain and the meshes "
+                                            "are darkened where it hides the sun (cameras can opt out: Camera "
+                                            "shadows). Nothing is drawn when no entity casts a shadow.")
+    shadow_map_size: int | None = Field(None, ge=256, le=8192,
+                                        description="Shadow map resolution in texels a side. Unset: 2048 on a "
+                                                    "hardware GPU, 1024 on a software rasteriser (clearing and "
+                                                    "sampling the map are CPU work there).")
+    shadow_distance: float = Field(50.0, gt=0.0, le=10000.0,
+                                   description="Shadows cover each view's frustum out to this distance in metres "
+                                               "and fade out over its last fifth; a smaller distance gives sharper "
+                                               "shadows (the same texels over less ground).")
+    shadow_filter: Literal["auto", "hard", "soft"] = Field(
+        "auto", description="hard: one depth comparison filtered bilinearly (2 x 2 texels); soft: four of them "
+                            "spread over 4 x 4 texels (percentage-closer filtering); auto: soft on a hardware "
+                            "GPU, hard on a software rasteriser.")
+    shadow_bias: float = Field(1.0, ge=0.0, le=16.0,
+                               description="Receivers look up the map this many shadow-map texels along their "
+                                           "normal (normal-offset bias): raise it against shadow acne (stripes), "
+                                           "lower it when shadows detach from their casters (peter-panning).")
     sky_top: Color3 = Field((0.25, 0.45, 0.85), description="Sky colour at the zenith (linear RGB).")
     sky_horizon: Color3 = Field((0.75, 0.85, 0.95), description="Sky colour at the horizon (linear RGB).")
     sun_direction: Vec3 = Field((0.4, 0.8, 0.3), description="Direction towards the sun (any length but zero).")

@@ -49,6 +49,8 @@ class CameraConfig(ConfigModel):
     update_interval: int = Field(1, ge=1, le=60,
                                  description="Render this view every N frames and show its last picture in "
                                              "between (minimaps, monitors); the main view always renders.")
+    shadows: bool = Field(True, description="Draw sun shadows in this view (with [render] shadows on); a map-like "
+                                            "top view may leave them out.")
     enabled: bool = True
 
     @model_validator(mode="after")
@@ -246,6 +248,7 @@ class MeshConfig(ConfigModel):
     shape: Literal["box", "sphere", "plane"] = Field("box", description="Unit box, unit-diameter sphere, unit plane.")
     color: Color3 = Field((0.7, 0.7, 0.7), description="Albedo (linear RGB).")
     emissive: float = Field(0.0, ge=0.0, le=100.0, description="Self-illumination multiplier of the albedo.")
+    cast_shadows: bool = Field(True, description="Cast a sun shadow ([render] shadows); every mesh receives them.")
     visible: bool = True
 
 

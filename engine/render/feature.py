@@ -34,6 +34,7 @@ import numpy as np
 if TYPE_CHECKING:
     from engine.render.graph import RenderGraph, ResourceHandle
     from engine.render.renderer import Renderer
+    from engine.render.shadows import ShadowCasters
     from engine.world import World
 
 OPAQUE = 0  # writes colour and depth
@@ -132,6 +133,13 @@ class RenderFeature:
         running the passes (``[render] static_layer_cache``); returning a key that misses a change shows a stale
         picture.
         """
+        return None
+
+    def shadow_casters(self, data: Any) -> ShadowCasters | None:
+        """What this feature draws into the sun's shadow maps this frame
+        (:class:`engine.render.shadows.ShadowCasters`: a key, world bounds and a depth-only draw), or None when
+        it casts no shadow (the default).  Called once per view that has shadows; a feature hidden in a view
+        (Camera ``hide_features``) casts none there."""
         return None
 
     def release(self) -> None:

@@ -159,6 +159,7 @@ class _PassDecl:
     reads: tuple[tuple[int, int], ...]  # (resource index, version)
     named_reads: tuple[str, ...]
     writes: tuple[_Write, ...]
+    no_wait: tuple[tuple[int, int], ...] = ()  # reads that need not wait for their writer (PassBuilder.read)
 
 
 @dataclass(frozen=True)
@@ -262,6 +263,7 @@ class PassBuilder:
         self._reads: list[tuple[int, int]] = []
         self._named_reads: list[str] = []
         self._writes: list[_Write] = []
+        self._no_wait: list[tuple[int, int]] = []
         self._sealed = False
 
     def create(self, name: str, desc: Hashable) -> ResourceHandle:
@@ -271,8 +273,13 @@ class PassBuilder:
         self._creates.append(index)
         return self._graph._handle(index, 0)
 
-    def read(self, target: ResourceHandle | str) -> ResourceHandle:
-        """Declare a read of a handle's version, or by name of the resource's last version this frame."""
+    def read(self, target: ResourceHandle | str, wait: bool = True) -> ResourceHandle:
+        """Declare a read of a handle's version, or by name of the resource's last version this frame.
+
+        ``wait=False``: the pass samples it on the GPU right after a small pass wrote it (a shadow map), so the
+        CPU has no reason to wait there: the read does not make the pass the frame's synchronisation point
+        (:attr:`CompiledGraph.sync_pass`), where the renderer hands the queued passes to the GPU and overlaps
+        the next simulation ticks with them."""
         self._check_open("read", target)
         if isinstance(target, ResourceHandle) and target.by_name:
             self._graph._check_epoch(target, self._pass, "reads")
@@ -283,6 +290,8 @@ class PassBuilder:
         self._graph._check_latest(target, self._pass)
         if (index, target.version) not in self._reads:
             self._reads.append((index, target.version))
+        if not wait and (index, target.version) not in self._no_wait:
+            self._no_wait.append((index, target.version))
         return target
 
     def write(self, handle: ResourceHandle) -> ResourceHandle:
@@ -307,7 +316,7 @@ class PassBuilder:
 
     def _declaration(self, side_effect: bool) -> _PassDecl:
         return _PassDecl(self._pass, side_effect, tuple(self._creates), tuple(self._reads),
-                         tuple(self._named_reads), tuple(self._writes))
+                         tuple(self._named_reads), tuple(self._writes), tuple(self._no_wait))
 
 
 class PassContext:
@@ -355,7 +364,9 @@ class CompiledGraph:
         # the first pass that reads what an earlier pass of the frame wrote (a version >= 1): the GPU must have
         # finished that work before it can go on, so it is where the CPU would first wait (RenderGraph.execute)
         self.first_sync: int | None = next((step for step, p in enumerate(order)
-                                            if any(version >= 1 for _, version in reads[p])), None)
+                                            if any(version >= 1 and (index, version) not in
+                                                   structure.passes[p].no_wait
+                                                   for index, version in reads[p])), None)
         self.sync_pass: str | None = None if self.first_sync is None else self.order[self.first_sync]
 
     def __repr__(self) -> str:

@@ -17,6 +17,7 @@ import numpy as np
 from engine.builtin import Terrain
 from engine.render.components import Hud, MeshConfig
 from engine.render.feature import OPAQUE, OVERLAY, SKY, ColorLayer, RenderFeature, View, write_view_color
+from engine.render.shadows import ShadowCasters, may_be_shadowed, read_shadow, receiver_uniforms
 from engine.render.terrain import TerrainChunks, build_terrain_chunks, draw_ranges, select_levels, shade_texels
 from engine.spatial import Transform, cross, model_matrices
 
@@ -179,8 +180,7 @@ def sun_rect(view: View, sun_dir: np.ndarray, min_cos: float) -> tuple[float, fl
 class _TerrainMesh:
     key: tuple
     chunks: TerrainChunks
-    vao: moderngl.VertexArray  # the per-pixel shade fetch (coarse chunks)
-    vao_vertex: moderngl.VertexArray  # the VERTEX_SHADE variant (full-detail chunks: Gouraud)
+    vaos: dict  # program -> its vertex array (the shader variants: per-pixel or per-vertex shade, shadows, texture)
     vbo: moderngl.Buffer
     ibo: moderngl.Buffer
     shade: moderngl.Texture  # rgba8, one texel per grid point: sqrt(baked diffuse + ambient light × albedo / scale)
@@ -190,9 +190,10 @@ class _TerrainMesh:
     detail_key: tuple = ()  # the texture array and strength it was made from
 
     def release(self) -> None:
-        for obj in (self.vao, self.vao_vertex, self.vbo, self.ibo, self.shade, self.detail):
+        for obj in (*self.vaos.values(), self.vbo, self.ibo, self.shade, self.detail):
             if obj is not None:
                 obj.release()
+        self.vaos.clear()
 
 
 class TerrainFeature(RenderFeature):
@@ -206,6 +207,8 @@ class TerrainFeature(RenderFeature):
         self._meshes: dict[int, _TerrainMesh] = {}
         self.last_draws: dict[str, int] = {}  # view name -> draw calls issued last frame (tests, profiling)
         self.last_triangles: dict[str, int] = {}
+        self.last_chunks: dict[str, int] = {}  # chunks drawn (not culled) last frame
+        self.last_shadowed: dict[str, int] = {}  # of which drawn with the shadow look-up (receiver culling)
         self.bakes = 0  # shade textures baked (tests)
         # full-detail chunks take the baked light per vertex (Gouraud) instead of a texture fetch per pixel: on
         # llvmpipe that fetch was ≈ 1/3 of the terrain pass (off: every chunk fetches per pixel; A/B, tests)
@@ -221,8 +224,8 @@ class TerrainFeature(RenderFeature):
 
     def static_key(self, view: View, data) -> Any:
         """The terrains drawn (height field, model matrix, colours, level-of-detail bound, ground texture): the
-        level selection and the baked light follow from them, the view and the light."""
-        return (self.vertex_shade,) + tuple(
+        level selection and the baked light follow from them, the view and the light; and the view's shadow map."""
+        return (self.vertex_shade, shadow_key(view)) + tuple(
             (entity, key, model.tobytes(), terrain.config.lod_pixels, tuple(map(tuple, terrain.config.colors)),
              _detail_key(terrain))
             for entity, key, terrain, model in data)
@@ -235,14 +238,10 @@ class TerrainFeature(RenderFeature):
             mesh.release()
         chunks = build_terrain_chunks(terrain.field)
         vbo, ibo = self.ctx.buffer(chunks.vertices.tobytes()), self.ctx.buffer(chunks.indices.tobytes())
-        textured = terrain.texture is not None
-        vao, vao_vertex = (self.ctx.vertex_array(self._program(vertex_shade, textured),
-                                                 [(vbo, "3f 3f 1f", "in_position", "in_normal", "in_skirt")], ibo,
-                                                 index_element_size=4) for vertex_shade in (False, True))
         rows, cols = terrain.field.heights.shape
         shade = self.ctx.texture((cols, rows), 4)
         shade.repeat_x = shade.repeat_y = False
-        mesh = _TerrainMesh(key, chunks, vao, vao_vertex, vbo, ibo, shade)
+        mesh = _TerrainMesh(key, chunks, {}, vbo, ibo, shade)
         self._meshes[entity] = mesh
         return mesh
 
@@ -285,13 +284,19 @@ class TerrainFeature(RenderFeature):
         detail.filter = (moderngl.LINEAR_MIPMAP_NEAREST, moderngl.LINEAR)
         mesh.detail, mesh.detail_key = detail, key
 
-    def _program(self, vertex_shade: bool = False, textured: bool = False) -> moderngl.Program:
-        defines = (("VERTEX_SHADE",) if vertex_shade else ()) + (("TEXTURED",) if textured else ())
+    def _program(self, vertex_shade: bool = False, textured: bool = False,
+                 shadows: tuple[str, ...] = ()) -> moderngl.Program:
+        defines = (("VERTEX_SHADE",) if vertex_shade else ()) + (("TEXTURED",) if textured else ()) + shadows
         return self.renderer.load_program(SHADERS, "terrain", defines)
 
     def add_passes(self, graph, view: View, data) -> None:
         if not data:
             return
+        shadow = view.extra.get("shadow")
+
+        def setup(b):
+            opaque_setup(view)(b)
+            read_shadow(b, view)
 
         def execute(pc):
             fbo = self.renderer.framebuffer(pc.get(view.color), pc.get(view.depth))
@@ -299,7 +304,8 @@ class TerrainFeature(RenderFeature):
             self.ctx.enable(moderngl.DEPTH_TEST)
             self.ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
             lighting = lighting_uniforms(self.renderer, view)
-            draws = triangles = 0
+            shadow_defines, shadow_uniforms = receiver_uniforms(shadow, pc)
+            draws = triangles = self.last_shadowed[view.name] = self.last_chunks[view.name] = 0
             for entity, key, terrain, model in data:
                 mesh = self._mesh(entity, key, terrain)
                 self._bake(mesh, terrain, model)
@@ -312,32 +318,55 @@ class TerrainFeature(RenderFeature):
                 levels = select_levels(mesh.chunks, model, view.view_proj, view.proj, view.camera_pos,
                                        view.height, view.ortho, terrain.config.lod_pixels)
                 mesh.shade.use(0)
-                for vao, ranges, vertex_shade in self._batches(mesh, levels):
-                    set_uniforms(self._program(vertex_shade, textured), **lighting, **detail, model=model.T.copy(),
-                                 shade_map=0, shade_scale=mesh.shade_scale, uv_scale=mesh.chunks.uv_scale,
-                                 uv_offset=mesh.chunks.uv_offset)
-                    for first, count in ranges:
-                        vao.render(moderngl.TRIANGLES, vertices=count, first=first)
-                    draws += len(ranges)
-                    triangles += sum(c for _, c in ranges) // 3
+                # receiver culling: only the chunks a caster's shadow may reach pay for the shadow look-up
+                receives = may_be_shadowed(shadow, chunk_boxes(mesh.chunks, model))
+                self.last_chunks[view.name] += int((levels >= 0).sum())
+                self.last_shadowed[view.name] += int(((levels >= 0) & receives).sum())
+                for in_shadow in (False, True):
+                    part = np.where(receives == in_shadow, levels, -1)
+                    uniforms = shadow_uniforms if in_shadow else {}
+                    for ranges, vertex_shade in self._batches(mesh, part):
+                        prog = self._program(vertex_shade, textured, shadow_defines if in_shadow else ())
+                        set_uniforms(prog, **lighting, **detail, **uniforms, model=model.T.copy(), shade_map=0,
+                                     shade_scale=mesh.shade_scale, uv_scale=mesh.chunks.uv_scale,
+                                     uv_offset=mesh.chunks.uv_offset)
+                        vao = mesh.vaos.get(prog)  # the object, not its GL name (reused after a shader reload)
+                        if vao is None:
+                            vao = mesh.vaos[prog] = self.ctx.vertex_array(
+                                prog, [(mesh.vbo, "3f 3f 1f", "in_position", "in_normal", "in_skirt")], mesh.ibo,
+                                index_element_size=4)
+                        for first, count in ranges:
+                            vao.render(moderngl.TRIANGLES, vertices=count, first=first)
+                        draws += len(ranges)
+                        triangles += sum(c for _, c in ranges) // 3
             self.last_draws[view.name], self.last_triangles[view.name] = draws, triangles
 
-        graph.add_pass(f"terrain.{view.name}", opaque_setup(view), execute)
+        graph.add_pass(f"terrain.{view.name}", setup, execute)
 
     def _batches(self, mesh: _TerrainMesh, levels: np.ndarray) -> list:
-        """(vertex array, draw ranges, vertex_shade) per shader variant: full-detail chunks (level 0, whose
-        vertices are the baked grid points) shade per vertex when :attr:`vertex_shade` is on, the rest fetch the
-        baked light per pixel."""
+        """(draw ranges, vertex_shade) per shader variant: full-detail chunks (level 0, whose vertices are the
+        baked grid points) shade per vertex when :attr:`vertex_shade` is on, the rest fetch the baked light per
+        pixel."""
         if not self.vertex_shade:
-            return [(mesh.vao, draw_ranges(mesh.chunks, levels), False)]
-        batches = [(mesh.vao_vertex, draw_ranges(mesh.chunks, np.where(levels == 0, 0, -1)), True),
-                   (mesh.vao, draw_ranges(mesh.chunks, np.where(levels > 0, levels, -1)), False)]
-        return [b for b in batches if b[1]]
+            return [(draw_ranges(mesh.chunks, levels), False)]
+        batches = [(draw_ranges(mesh.chunks, np.where(levels == 0, 0, -1)), True),
+                   (draw_ranges(mesh.chunks, np.where(levels > 0, levels, -1)), False)]
+        return [b for b in batches if b[0]]
 
     def release(self) -> None:
         for mesh in self._meshes.values():
             mesh.release()
         self._meshes.clear()
+
+
+def chunk_boxes(chunks: TerrainChunks, model: np.ndarray) -> np.ndarray:
+    """(chunks, 2, 3): each chunk's bounding box in the world (the model matrix's turn of the local box)."""
+    m = np.asarray(model, np.float64)
+    centre = (chunks.box_min + chunks.box_max) * 0.5
+    half = (chunks.box_max - chunks.box_min) * 0.5
+    c = np.einsum("ij,nj->ni", m[:3, :3], centre) + m[:3, 3]
+    h = np.einsum("ij,nj->ni", np.abs(m[:3, :3]), half)
+    return np.stack([c - h, c + h], axis=1)
 
 
 def _detail_key(terrain: Terrain) -> tuple:
@@ -388,7 +417,8 @@ def primitive(shape: str, segments: tuple[int, int] = (12, 20)) -> tuple[np.ndar
 
 
 class MeshFeature(RenderFeature):
-    """Every entity with Transform + MeshConfig, instanced: one draw call per shape."""
+    """Every entity with Transform + MeshConfig, instanced: one draw call per shape.  Meshes cast sun shadows
+    (those with ``cast_shadows``) and receive them."""
 
     name = "meshes"
     phase = OPAQUE
@@ -398,14 +428,20 @@ class MeshFeature(RenderFeature):
         super().__init__(renderer)
         self._geometry: dict[str, tuple] = {}
         self._instances: dict[str, moderngl.Buffer] = {}
+        # the shadow pass's own instance buffers: the lit pass rewrites its buffers later in the frame, and a
+        # software rasteriser would wait for the shadow draw to finish before letting them be written
+        self._shadow_instances: dict[str, moderngl.Buffer] = {}
+        self._shadow_vaos: dict[str, moderngl.VertexArray] = {}
 
-    def extract(self, world) -> dict[str, np.ndarray]:
+    def extract(self, world) -> dict[str, tuple[np.ndarray, int]]:
+        """shape -> (instances (n, 20) float32, how many of them cast shadows: the first ones)."""
         groups: dict[str, list] = {}
         for _, (mesh, t) in world.query(MeshConfig, Transform):
             if mesh.visible:
                 groups.setdefault(mesh.shape, []).append((t, mesh))
         out = {}
         for shape, items in groups.items():
+            items.sort(key=lambda item: not item[1].cast_shadows)  # stable: casters first, in query order
             transforms = [t for t, _ in items]
             matrices = model_matrices(np.array([t.position for t in transforms]),
                                       np.array([t.rotation for t in transforms]),
@@ -414,12 +450,38 @@ class MeshFeature(RenderFeature):
             data[:, :16] = matrices.transpose(0, 2, 1).reshape(len(items), 16)  # column-major for GLSL
             data[:, 16:19] = [m.color for _, m in items]
             data[:, 19] = [m.emissive for _, m in items]
-            out[shape] = data
+            out[shape] = (data, sum(1 for _, m in items if m.cast_shadows))
         return out
 
     def static_key(self, view: View, data) -> Any:
-        """Every instance's matrix, colour and emission: unchanged while nothing moves."""
-        return tuple((shape, inst.tobytes()) for shape, inst in sorted(data.items()))
+        """Every instance's matrix, colour and emission, and the view's shadow map: unchanged while nothing
+        moves."""
+        return (shadow_key(view),) + tuple((shape, inst.tobytes(), casters)
+                                           for shape, (inst, casters) in sorted(data.items()))
+
+    def shadow_casters(self, data) -> ShadowCasters | None:
+        casting = {shape: inst[:casters] for shape, (inst, casters) in data.items() if casters}
+        if not casting:
+            return None
+        boxes = np.concatenate([instance_bounds(inst) for inst in casting.values()])
+
+        def draw(light_view_proj: np.ndarray) -> None:
+            prog = self.renderer.load_program(SHADERS, "shadow_mesh")
+            prog["light_view_proj"].write(light_view_proj.T.copy().tobytes())
+            for shape, inst in casting.items():
+                vao = self._shadow_vao(shape, len(inst))
+                self._shadow_instances[shape].write(inst.tobytes())
+                vao.render(moderngl.TRIANGLES, instances=len(inst))
+
+        key = tuple((shape, inst[:, :16].tobytes()) for shape, inst in sorted(casting.items()))
+        return ShadowCasters(key, boxes, draw)
+
+    def _geometry_of(self, shape: str) -> tuple:
+        if shape not in self._geometry:
+            verts, idx = primitive(shape)
+            vbo, ibo = self.ctx.buffer(verts.tobytes()), self.ctx.buffer(idx.tobytes())
+            self._geometry[shape] = ({}, vbo, ibo)
+        return self._geometry[shape]
 
     def _vao(self, shape: str, count: int, defines: tuple[str, ...]) -> moderngl.VertexArray:
         """The shape's VAO for the program variant ``defines`` over its instance buffer (grown as needed)."""
@@ -428,16 +490,13 @@ class MeshFeature(RenderFeature):
         if buf is None or buf.size < needed:
             if buf is not None:
                 buf.release()
-                vaos, vbo, ibo = self._geometry.pop(shape)
-                for obj in (*vaos.values(), vbo, ibo):
-                    obj.release()
+                vaos, _, _ = self._geometry[shape]
+                for vao in vaos.values():
+                    vao.release()
+                vaos.clear()
             buf = self.ctx.buffer(reserve=max(needed, 64 * self.INSTANCE_FLOATS * 4))
             self._instances[shape] = buf
-        if shape not in self._geometry:
-            verts, idx = primitive(shape)
-            vbo, ibo = self.ctx.buffer(verts.tobytes()), self.ctx.buffer(idx.tobytes())
-            self._geometry[shape] = ({}, vbo, ibo)
-        vaos, vbo, ibo = self._geometry[shape]
+        vaos, vbo, ibo = self._geometry_of(shape)
         if defines not in vaos:
             prog = self.renderer.load_program(SHADERS, "mesh", defines)
             vaos[defines] = self.ctx.vertex_array(prog, [(vbo, "3f 3f", "in_position", "in_normal"),
@@ -445,9 +504,30 @@ class MeshFeature(RenderFeature):
                                                           "in_color")], ibo)
         return vaos[defines]
 
+    def _shadow_vao(self, shape: str, count: int) -> moderngl.VertexArray:
+        """The shape's depth-only VAO over its shadow instance buffer (grown as needed)."""
+        buf = self._shadow_instances.get(shape)
+        needed = count * self.INSTANCE_FLOATS * 4
+        if buf is None or buf.size < needed:
+            if buf is not None:
+                buf.release()
+                self._shadow_vaos.pop(shape).release()
+            buf = self._shadow_instances[shape] = self.ctx.buffer(reserve=max(needed, 64 * self.INSTANCE_FLOATS * 4))
+        if shape not in self._shadow_vaos:
+            _, vbo, ibo = self._geometry_of(shape)
+            prog = self.renderer.load_program(SHADERS, "shadow_mesh")
+            self._shadow_vaos[shape] = self.ctx.vertex_array(
+                prog, [(vbo, "3f 12x", "in_position"), (buf, "4f 4f 4f 4f 16x/i", "m0", "m1", "m2", "m3")], ibo)
+        return self._shadow_vaos[shape]
+
     def add_passes(self, graph, view: View, data) -> None:
         if not data:
             return
+        shadow = view.extra.get("shadow")
+
+        def setup(b):
+            opaque_setup(view)(b)
+            read_shadow(b, view)
 
         def execute(pc):
             fbo = self.renderer.framebuffer(pc.get(view.color), pc.get(view.depth))
@@ -455,24 +535,42 @@ class MeshFeature(RenderFeature):
             self.ctx.enable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
             self.ctx.disable(moderngl.BLEND)
             lighting = lighting_uniforms(self.renderer, view)
-            defines = ("FOG",) if lighting["fog_density"] > 0.0 else ()
-            set_uniforms(self.renderer.load_program(SHADERS, "mesh", defines), **lighting)
-            for shape, inst in data.items():
+            shadow_defines, shadow_uniforms = receiver_uniforms(shadow, pc)
+            defines = (("FOG",) if lighting["fog_density"] > 0.0 else ()) + shadow_defines
+            set_uniforms(self.renderer.load_program(SHADERS, "mesh", defines), **lighting, **shadow_uniforms)
+            for shape, (inst, _) in data.items():
                 vao = self._vao(shape, len(inst), defines)
                 self._instances[shape].write(inst.tobytes())
                 vao.render(moderngl.TRIANGLES, instances=len(inst))
             self.ctx.disable(moderngl.CULL_FACE)
 
-        graph.add_pass(f"meshes.{view.name}", opaque_setup(view), execute)
+        graph.add_pass(f"meshes.{view.name}", setup, execute)
 
     def release(self) -> None:
         for vaos, vbo, ibo in self._geometry.values():
             for obj in (*vaos.values(), vbo, ibo):
                 obj.release()
-        for buf in self._instances.values():
-            buf.release()
+        for obj in (*self._instances.values(), *self._shadow_instances.values(), *self._shadow_vaos.values()):
+            obj.release()
         self._geometry.clear()
         self._instances.clear()
+        self._shadow_instances.clear()
+        self._shadow_vaos.clear()
+
+
+def instance_bounds(inst: np.ndarray) -> np.ndarray:
+    """(n, 2, 3) float64: the world box (min, max corners) of each instance of a unit primitive (inside the
+    cube [-0.5, 0.5]³) with the column-major model matrices in ``inst[:, :16]``."""
+    columns = inst[:, :16].reshape(len(inst), 4, 4).astype(np.float64)  # row j: the matrix's column j
+    centre = columns[:, 3, :3]
+    half = 0.5 * np.abs(columns[:, :3, :3]).sum(axis=1)
+    return np.stack([centre - half, centre + half], axis=1)
+
+
+def shadow_key(view: View) -> Any:
+    """What a shadow-receiving feature's static key includes: the content of the view's shadow map."""
+    shadow = view.extra.get("shadow")
+    return None if shadow is None else shadow.key
 
 
 # ----------------------------------------------------------- tone map, composite

@@ -23,6 +23,7 @@ import numpy as np
 from engine.render.components import Camera, Hud, look_at, projection, view_matrix, viewport_pixels
 from engine.render.feature import OVERLAY, SKY, ColorLayer, RenderFeature, View
 from engine.render.graph import RenderGraph, ResourcePool, TextureDesc
+from engine.render.shadows import Shadow, fit_light, light_basis, light_boxes
 from engine.spatial import Transform
 
 if TYPE_CHECKING:
@@ -161,6 +162,15 @@ class PassTimer:
 
 
 @dataclass
+class _ShadowMap:
+    """A camera's kept shadow map and the key of what it holds (None: nothing drawn yet)."""
+
+    texture: moderngl.Texture
+    size: int
+    key: tuple | None = None
+
+
+@dataclass
 class _StaticLayer:
     """A view's kept static layer (Renderer._plan_static_layer): HDR colour and depth, and the key they show."""
 
@@ -223,6 +233,9 @@ class Renderer:
         self._static: dict[int, _StaticLayer] = {}
         self._static_seen: dict[int, tuple[tuple | None, dict[str, Any]]] = {}
         self.static_layer_counts = {"drawn": 0, "stored": 0, "restored": 0}  # views per outcome (tests, profiling)
+        # camera entity -> its view's sun shadow map (depth texture, compared when sampled) and what it holds
+        self._shadow_maps: dict[int, _ShadowMap] = {}
+        self.shadow_draws = 0  # shadow maps drawn (tests: a still scene draws its map once)
         self.fold_color_layers = True  # a view's last colour layer is added in its tone map (_fold_layer)
         self._shader_generation = 0  # bumped by reload_shaders: kept pictures drawn with older shaders are stale
         self._final_fbo: moderngl.Framebuffer | None = None
@@ -378,6 +391,19 @@ class Renderer:
         return (not self.software) if mode == "auto" else mode == "fxaa"
 
     @property
+    def shadow_map_size(self) -> int:
+        """Texels a side of the shadow maps: ``[render] shadow_map_size``, unset: 2048 on a hardware GPU, 1024 on
+        a software rasteriser."""
+        size = self.settings.shadow_map_size
+        return int(size) if size is not None else (1024 if self.software else 2048)
+
+    @property
+    def soft_shadows(self) -> bool:
+        """Whether receivers filter the shadow map with four taps (``shadow_filter``; ``auto``: on a GPU)."""
+        mode = self.settings.shadow_filter
+        return (not self.software) if mode == "auto" else mode == "soft"
+
+    @property
     def final_texture(self) -> moderngl.Texture:
         return self._final
 
@@ -412,6 +438,7 @@ class Renderer:
         v.extra["border"] = tuple(cfg.border_color)
         v.extra["hide"] = frozenset(cfg.hide_features)
         v.extra["interval"] = 1 if main else int(cfg.update_interval)
+        v.extra["shadows"] = bool(cfg.shadows)
         return v
 
     # --------------------------------------------------------------------- frame
@@ -441,6 +468,7 @@ class Renderer:
                 continue
             hidden = view.extra.get("hide", ())
             features = [(i, f) for i, f in self._ordered if f.phase < OVERLAY and f.name not in hidden]
+            self._declare_shadow(timed, view, features, data)
             static = self._plan_static_layer(view, features, data)
             if static is None:
                 self._declare_view_targets(timed, view)
@@ -461,6 +489,8 @@ class Renderer:
             self._free_static(camera)
         for camera in [c for c in self._static_seen if c not in live]:
             del self._static_seen[camera]
+        for camera in [c for c in self._shadow_maps if c not in live]:
+            self._free_shadow(camera)
         for i, view in enumerate(self.views):
             final = self._declare_present(timed, final, view, first=i == 0)
         screen = replace(self.views[0], name="screen", width=self.width, height=self.height,
@@ -521,6 +551,69 @@ class Renderer:
                 fbo.clear(*self.settings.sky_horizon, 1.0, depth=1.0)
 
         graph.add_pass(f"clear.{view.name}", setup, execute)
+
+    # ------------------------------------------------------------------ shadows
+    def _declare_shadow(self, graph, view: View, features: list, data: list) -> None:
+        """The view's sun shadow map this frame (``view.extra["shadow"]``, :class:`engine.render.shadows.Shadow`):
+        fitted to the view (engine/render/shadows.py), drawn by a pass only when the light box or a caster
+        changed, otherwise the kept map is read again.  No map without ``[render] shadows``, with the camera's
+        ``shadows`` off, or without casters."""
+        view.extra.pop("shadow", None)
+        camera = view.camera_entity
+        if not (self.settings.shadows and view.extra.get("shadows", True)):
+            self._free_shadow(camera)
+            return
+        casters = [c for c in (f.shadow_casters(data[i]) for i, f in features) if c is not None]
+        if not casters:
+            self._free_shadow(camera)
+            return
+        size = self.shadow_map_size
+        boxes = np.concatenate([np.asarray(c.boxes, np.float64).reshape(-1, 2, 3) for c in casters])
+        bounds = np.array([boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)])
+        light_view_proj, matrix, texel, extent = fit_light(view, self.sun_direction, self.settings.shadow_distance,
+                                                           size, bounds)
+        key = (size, light_view_proj.tobytes(), tuple(c.key for c in casters))
+        kept = self._shadow_maps.get(camera)
+        if kept is None or kept.size != size:
+            self._free_shadow(camera)
+            texture = self.ctx.depth_texture((size, size))
+            texture.compare_func = "<="  # sampler2DShadow: a comparison, filtered over 2 x 2 texels
+            texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
+            texture.repeat_x = texture.repeat_y = False
+            kept = self._shadow_maps[camera] = _ShadowMap(texture, size)
+        handle = graph.import_resource(f"{view.name}.shadow_map", kept.texture, TextureDesc(size, size, "depth24"))
+        if kept.key != key:
+            written = []
+
+            def setup(b):
+                written.append(b.write(handle))
+
+            def execute(pc):
+                fbo = self.framebuffer(None, pc.get(handle))
+                fbo.use()
+                fbo.clear(depth=1.0)
+                self.ctx.enable(moderngl.DEPTH_TEST)
+                self.ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)  # both faces: open shapes (planes) cast too
+                self.ctx.polygon_offset = (2.0, 4.0)  # slope-scaled depth bias against self-shadowing stripes
+                try:
+                    for caster in casters:
+                        caster.draw(light_view_proj)
+                finally:
+                    self.ctx.polygon_offset = (0.0, 0.0)
+                kept.key = key
+                self.shadow_draws += 1
+
+            graph.add_pass(f"shadow.{view.name}", setup, execute)
+            handle = written[0]
+        basis = np.array(light_basis(self.sun_direction))
+        view.extra["shadow"] = Shadow(handle, matrix, light_view_proj, texel,
+                                      float(self.settings.shadow_bias) * texel, float(self.settings.shadow_distance),
+                                      size, self.soft_shadows, key, basis, light_boxes(basis, boxes), extent)
+
+    def _free_shadow(self, camera: int) -> None:
+        kept = self._shadow_maps.pop(camera, None)
+        if kept is not None:
+            self._free_resource(kept.texture)
 
     # ---------------------------------------------------------- static layer
     def _plan_static_layer(self, view: View, features: list, data: list) -> list | None:
@@ -889,6 +982,8 @@ class Renderer:
         for camera in list(self._static):
             self._free_static(camera)
         self._static_seen.clear()
+        for camera in list(self._shadow_maps):
+            self._free_shadow(camera)
         self.graph.pool.clear()
         for fbo in self._framebuffers.values():
             fbo.release()

@@ -16,13 +16,17 @@ float lobe(float x, float shininess) {
     if (shininess == 64.0) return (x16 * x16) * (x16 * x16);
     return pow(x, shininess);
 }
-vec3 shade(vec3 albedo, vec3 n, vec3 pos, float shininess, float spec_strength) {
-    float ndl = max(dot(n, sun_dir), 0.0);
+// sun_lit: how much of the sun reaches the point (shadow.glsl's sun_visibility; 1 without shadows).
+vec3 shade_in_sun(vec3 albedo, vec3 n, vec3 pos, float shininess, float spec_strength, float sun_lit) {
+    float ndl = max(dot(n, sun_dir), 0.0) * sun_lit;
     vec3 hemi = mix(sky_horizon * 0.35, sky_top, n.y * 0.5 + 0.5) * ambient;
     vec3 v = normalize(camera_pos - pos);
     vec3 h = normalize(v + sun_dir);
     float spec = lobe(max(dot(n, h), 0.0), shininess) * spec_strength;
     return albedo * (sun_color * ndl + hemi) + sun_color * spec * ndl;
+}
+vec3 shade(vec3 albedo, vec3 n, vec3 pos, float shininess, float spec_strength) {
+    return shade_in_sun(albedo, n, pos, shininess, spec_strength, 1.0);
 }
 vec3 fog(vec3 color, vec3 pos) {
     float f = 1.0 - exp(-length(camera_pos - pos) * fog_density);

@@ -1,14 +1,24 @@
 #version 330
 // Variant FOG (passes.py MeshFeature): distance fog, compiled in only when the view has fog.
+// Variant SHADOWS: the sun's light is dimmed by the view's shadow map (shadow.glsl).
 #include "lit.glsl"
+#include "shadow.glsl"
 in vec3 v_pos;
 in vec3 v_normal;
 in vec4 v_color;
+#ifdef SHADOWS
+in vec4 v_shadow;
+#endif
 out vec4 frag;
 void main() {
     vec3 n = normalize(v_normal);
     if (!gl_FrontFacing) n = -n;
-    vec3 c = shade(v_color.rgb, n, v_pos, 48.0, 0.25) + v_color.rgb * v_color.a;
+#ifdef SHADOWS
+    float sun_lit = sun_visibility(v_shadow);
+#else
+    float sun_lit = 1.0;
+#endif
+    vec3 c = shade_in_sun(v_color.rgb, n, v_pos, 48.0, 0.25, sun_lit) + v_color.rgb * v_color.a;
 #ifdef FOG
     c = fog(c, v_pos);
 #endif

@@ -10,7 +10,12 @@
 //
 // TEXTURED (a Terrain with a ground texture): the lit albedo is multiplied per pixel by the tiled texture, so
 // the varyings keep it apart from the specular.
+//
+// SHADOWS: the shadow map's look-up point, and the sun's share of the light per colour channel,
+// sun·(n·l) / (sun·(n·l) + sky ambient): the albedo (and its slope darkening) multiplies both and cancels, so the
+// baked texel need not hold it apart.
 #include "lit.glsl"
+#include "shadow.glsl"
 uniform mat4 view_proj;
 uniform mat4 model;
 uniform vec2 uv_scale;   // local (x, z) -> shade texture coordinates, texel centres on the grid points
@@ -35,6 +40,15 @@ out vec3 v_color;           // the fogged colour of this grid point
 out vec2 v_uv;
 out vec4 v_fogged;   // rgb: mix(specular, sky_horizon, fog); a: shade_scale · (1 - fog)
 #endif
+#ifdef SHADOWS
+out vec4 v_shadow;
+#if defined(VERTEX_SHADE) && !defined(TEXTURED)
+out vec3 v_sun;
+#else
+out vec3 v_sun_part;
+out vec3 v_specular;
+#endif
+#endif
 void main() {
     vec4 world = model * vec4(in_position, 1.0);
     vec3 n = normalize(mat3(model) * in_normal);
@@ -45,6 +59,13 @@ void main() {
     float fog = clamp(1.0 - exp(-length(camera_pos - world.xyz) * fog_density), 0.0, 1.0);
     vec4 fogged = vec4(mix(specular, sky_horizon, fog), shade_scale * (1.0 - fog));
     vec2 uv = in_position.xz * uv_scale + uv_offset;
+#ifdef SHADOWS
+    v_shadow = shadow_coord(world.xyz, n);
+    vec3 sun = sun_color * max(dot(n, sun_dir), 0.0);
+    vec3 hemi = mix(sky_horizon * 0.35, sky_top, n.y * 0.5 + 0.5) * ambient;  // as terrain.py's shade_texels
+    vec3 sun_part = sun / max(sun + hemi, vec3(1e-6));
+    vec3 specular_fogged = specular * (1.0 - fog);
+#endif
 #ifdef VERTEX_SHADE
     ivec2 size = textureSize(shade_map, 0);
     vec3 light = texelFetch(shade_map, clamp(ivec2(floor(uv * vec2(size))), ivec2(0), size - 1), 0).rgb;
@@ -53,10 +74,17 @@ void main() {
     v_add = fogged.rgb;
 #else
     v_color = light * light * fogged.a + fogged.rgb;
+#ifdef SHADOWS
+    v_sun = light * light * fogged.a * sun_part + specular_fogged;
+#endif
 #endif
 #else
     v_fogged = fogged;
     v_uv = uv;
+#endif
+#if defined(SHADOWS) && !(defined(VERTEX_SHADE) && !defined(TEXTURED))
+    v_sun_part = sun_part;
+    v_specular = specular_fogged;
 #endif
 #ifdef TEXTURED
     v_detail_uv = in_position.xz * detail_scale;

@@ -16,6 +16,7 @@ seed = 1
 
 [render]
 fog_density = 0.0
+shadows = false  # "auto" shadow settings differ between the GPU and llvmpipe too: this compares anti-aliasing only
 
 [[entities]]
 name = "camera"

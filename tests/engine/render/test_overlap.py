@@ -62,6 +62,35 @@ def test_on_sync_runs_after_the_last_pass_when_nothing_reads_an_earlier_output()
     assert graph.compile().sync_pass is None
 
 
+def test_a_read_that_need_not_wait_does_not_move_the_sync_point():
+    """A shadow map: a small pass writes it, the opaque passes sample it on the GPU; the CPU need not wait there,
+    so the ticks still overlap the whole opaque work (PassBuilder.read(wait=False))."""
+    for wait, expected in ((True, "scene"), (False, "present")):
+        log: list[str] = []
+        graph = RenderGraph(ResourcePool(lambda desc: object()))
+        shadow = graph.import_resource("shadow_map", object(), COLOR)
+        screen = graph.import_resource("screen", object(), COLOR)
+        out = {}
+
+        def draw_shadow(b: PassBuilder) -> None:
+            out["shadow"] = b.write(shadow)
+
+        def scene(b: PassBuilder) -> None:
+            b.read(out["shadow"], wait=wait)
+            out["hdr"] = b.write(b.create("hdr", COLOR))
+
+        def present(b: PassBuilder) -> None:
+            b.read(out["hdr"])
+            b.write(screen)
+
+        graph.add_pass("shadow", draw_shadow, lambda pc: log.append("shadow"))
+        graph.add_pass("scene", scene, lambda pc: log.append("scene"))
+        graph.add_pass("present", present, lambda pc: log.append("present"))
+        graph.execute(on_sync=lambda: log.append("SYNC"))
+        assert graph.compile().sync_pass == expected
+        assert log.index("SYNC") == log.index(expected) - 1
+
+
 def test_render_frame_without_a_renderer_still_runs_the_overlapped_ticks():
     app = App("configs/scenes/sandbox.toml", seed=3)
     app.render_frame(overlap=lambda: app.step(2))
