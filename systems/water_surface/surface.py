@@ -5,8 +5,10 @@ hundreds of numpy calls); the older ``grid`` method stays in numpy.
 
 Order inside a step (seeds/003): random drops and impact dents → the plane S' of each body (mean water height
 under it) → cross-section D' (2.2.2), nudged (fig. 2.3) → added points (2.2.3) carrying their heights from the
-last step (or lifted onto the surface, eq. 2.2–2.4, when new) → wave generation ±α·d(t) (eq. 2.5–2.7) →
-propagation (eq. 2.8–2.12) with the vertices inside bodies held as obstacles → damping. With
+last step (or lifted onto the surface, eq. 2.2–2.4, when new) → wave generation ±α·d(t) (eq. 2.5–2.7) computed
+→ propagation (eq. 2.8–2.12) with the vertices inside bodies held as obstacles → ±α·d(t) added to the added
+points' heights at t and t + 1 (a displacement, ``kernels.finish``; the grid feels it from the next step) →
+volume kept → damping. With
 ``wave_source = "grid"`` the added points are replaced by the older column displacement (``grid_source``).
 """
 
