@@ -59,12 +59,15 @@ def splat_blobs_numpy(target: F32, centres: NDArray[np.float64], directions: NDA
     and ``across`` the semi-axes in cells.  Each blob adds amplitude·(1 − q²)³ where
     q² = (d·û)²/a² + (|d|² − (d·û)²)/b² < 1 (a smooth, compactly supported bump).  Particles are grouped by the
     stencil radius they need (⌈a⌉ cells, at most a handful of groups), each group is evaluated as one
-    (particles × stencil) array (two small matrix products, see :func:`_splat_group`) and scattered with an
-    unbuffered ``np.add.at`` (sequential in index order, so the sum repeats bit for bit) into a zeroed box that
-    holds every stencil (the grid padded by the largest reach, cut to the blobs' extent), so no bounds test is
-    needed; the box's part inside the grid is added back at the end.  Blobs centred
-    more than one cell outside the grid are skipped (particles never are: they are reborn when they leave).
-    Returns the number of blobs added.
+    (particles × stencil) array (see :func:`_splat_group`) and scattered with an unbuffered ``np.add.at``
+    (sequential in index order, so the sum repeats bit for bit) into a zeroed box that holds every stencil (the
+    grid padded by the largest reach, cut to the blobs' extent), so no bounds test is needed; the box's part inside
+    the grid is added back at the end.  Blobs centred more than one cell outside the grid are skipped (particles
+    never are: they are reborn when they leave).  Returns the number of blobs added.
+
+    The float32 operations are the compiled kernel's, in its order (products summed left to right, no BLAS; the
+    offset from the rounded cell taken in the grid's own index space, before the padding), so the two give the
+    same bits: this is the kernel's reference in the tests.
     """
     if len(centres) == 0 or amplitude == 0.0:
         return 0
@@ -75,10 +78,11 @@ def splat_blobs_numpy(target: F32, centres: NDArray[np.float64], directions: NDA
             return 0
     reach = np.maximum(np.ceil(along).astype(np.int64), 1)
     pad = int(reach.max()) + 2
-    centres = centres + pad  # index space of the grid padded by ``pad`` cells on every side
+    centres = centres.astype(np.float32)  # the kernel's float32 centres, in the grid's index space
     # Only the box the stencils can reach is allocated and added back: the rounded centre cell of each blob (as in
-    # _splat_group) ± its reach.  Cells outside it would only have received + 0.
-    base = np.rint(centres.astype(np.float32)).astype(np.intp)
+    # _splat_group) ± its reach, in the index space of the grid padded by ``pad`` cells on every side.  Cells
+    # outside it would only have received + 0.
+    base = np.rint(centres).astype(np.intp) + pad
     lo = (base - reach[:, None]).min(axis=0)
     hi = (base + reach[:, None]).max(axis=0) + 1
     shape = tuple(int(n) for n in hi - lo)
@@ -90,7 +94,7 @@ def splat_blobs_numpy(target: F32, centres: NDArray[np.float64], directions: NDA
         batch = max(1, _SPLAT_CHUNK // len(stencil[0]))
         for start in range(0, len(members), batch):
             sel = members[start:start + batch]
-            _splat_group(flat, shape, lo, centres[sel], directions[sel], along[sel], across[sel], stencil,
+            _splat_group(flat, shape, lo - pad, centres[sel], directions[sel], along[sel], across[sel], stencil,
                          amplitude)
     start = np.maximum(lo, pad)  # the part of the box inside the target (target cell i is padded cell i + pad)
     stop = np.minimum(hi, np.array(target.shape) + pad)
@@ -121,18 +125,23 @@ def _stencil(reach: int, shape: tuple[int, ...]) -> tuple[NDArray[np.intp], NDAr
 
 def _splat_group(flat: F32, shape: tuple[int, ...], origin: NDArray[np.intp], centres, directions, along, across,
                  stencil, amplitude) -> None:
-    """One stencil size: q for every (particle, offset) pair from two (M×3)·(3×S) products, since with
-    d = f + o (f the rounded cell's offset from the centre, o the stencil offset):
-    d·û = f·û + o·û and |d|² = |f|² + 2 f·o + |o|².  Only the pairs inside the ellipsoid (q > 0) are finished.
-    ``flat`` is a box of ``shape`` whose cell 0 is the cell ``origin`` of the centres' index space."""
+    """One stencil size: q for every (particle, offset) pair, since with d = f + o (f the rounded cell's offset
+    from the centre, o the stencil offset): d·û = f·û + o·û and |d|² = |f|² + 2 f·o + |o|².  Only the pairs
+    inside the ellipsoid (q > 0) are finished.  ``centres`` are float32 in the grid's index space; ``flat`` is a
+    box of ``shape`` whose cell 0 is the cell ``origin`` of that space.  Every product is summed left to right
+    (x, y, z) in float32, as :func:`systems.toon_smoke.kernels.splat_blobs_kernel` does per pair."""
     offset_flat, offsets_t, offsets_sq = stencil
-    c = centres.astype(np.float32)
-    base = np.rint(c).astype(np.intp)
-    frac = base.astype(np.float32) - c
-    axis = directions.astype(np.float32)
-    t = (frac * axis).sum(axis=1)[:, None] + axis @ offsets_t
-    # 2·(f·o) as (2f)·o: doubling is exact, so the product has the same bits
-    dist2 = (frac * frac).sum(axis=1)[:, None] + (frac + frac) @ offsets_t
+    ox, oy, oz = offsets_t[0], offsets_t[1], offsets_t[2]
+    c = centres
+    rounded = np.rint(c)
+    base = rounded.astype(np.intp)
+    f = rounded - c  # exact (Sterbenz): |f| ≤ ½
+    a = directions.astype(np.float32)
+    fa = f[:, 0] * a[:, 0] + f[:, 1] * a[:, 1] + f[:, 2] * a[:, 2]
+    ff = f[:, 0] * f[:, 0] + f[:, 1] * f[:, 1] + f[:, 2] * f[:, 2]
+    g = f + f  # 2·(f·o) as (2f)·o: doubling is exact, so the products have the same bits
+    t = fa[:, None] + (a[:, 0, None] * ox + a[:, 1, None] * oy + a[:, 2, None] * oz)
+    dist2 = ff[:, None] + (g[:, 0, None] * ox + g[:, 1, None] * oy + g[:, 2, None] * oz)
     dist2 += offsets_sq
     inv_a2 = (1.0 / along ** 2).astype(np.float32)[:, None]
     inv_b2 = (1.0 / across ** 2).astype(np.float32)[:, None]

@@ -1,16 +1,15 @@
 """Compiled kernels (``engine.jit.kernel``) of the toon smoke's per-step loops.
 
 :func:`splat_blobs_kernel`: the density blobs of §3.3 (figure 2, seeds/002), one ellipsoidal bump per particle.
-In numpy (:func:`systems.toon_smoke.display.splat_blobs_numpy`) this is two (particles × stencil) matrix products,
-masks, a gather and an unbuffered ``np.add.at`` per stencil size: on the demo's 32³ display grid with a few
-hundred particles the calls, not the arithmetic, took the time (about 1.4 ms a volume a step).  Here it is one
-loop over the particles and their stencil cells, with no temporaries.
+In numpy (:func:`systems.toon_smoke.display.splat_blobs_numpy`) this is whole (particles × stencil) arrays, masks, a
+gather and an unbuffered ``np.add.at`` per stencil size: on the demo's 32³ display grid with a few hundred
+particles the calls, not the arithmetic, took the time (about 1.4 ms a volume a step).  Here it is one loop over
+the particles and their stencil cells, with no temporaries.
 
-The float32 operations are those of the numpy code, in its order, except the stencil products: the numpy code
-gets f·o and û·o from a BLAS matrix product, whose rounding depends on the library and the CPU (fused
-multiply-adds or not); the kernel sums the three products left to right, the same on every machine.  The
-blobs are added to a zeroed buffer in the numpy code's order (stencil sizes ascending, particles, stencil cells)
-and the buffer to the grid, so the sums round the same way.
+The float32 operations are those of the numpy code, in its order (the stencil products summed left to right in
+both, no BLAS matrix product, whose rounding would depend on the library and the CPU), and the blobs are added to a
+zeroed buffer in the numpy code's order (stencil sizes ascending, particles, stencil cells) and the buffer to the
+grid, so the two give the same bits (tested).
 """
 
 from __future__ import annotations
