@@ -94,3 +94,48 @@ def assert_golden(image, name: str, mean_tol: float = GOLDEN_MEAN_TOL, pixel_tol
         pytest.fail(f"{name}: image differs from {ref_path} (mean {mean:.2f}, limit {mean_tol}; {off:.2%} of pixels off "
                     f"by more than {GOLDEN_PIXEL_DIFF}, limit {pixel_tol:.2%}; max {peak}); "
                     f"see {name}.actual.png and {name}.diff.png next to it", pytrace=False)
+
+
+_GL_MAKERS = ("texture", "depth_texture", "texture_array", "texture3d", "texture_cube", "buffer", "vertex_array",
+              "simple_vertex_array", "framebuffer", "renderbuffer", "depth_renderbuffer", "program",
+              "compute_shader", "sampler", "query")
+
+
+def track_gl_objects(monkeypatch):
+    """Record every GL object made through a moderngl context from now on (until the test ends); returns a function
+    giving how many of each kind are still live (not released), e.g. ``{"texture": 3, "framebuffer": 2}``.  An
+    object dropped without ``release()`` counts as live: the context keeps it (moderngl's default gc_mode)."""
+    import collections
+
+    import moderngl
+
+    made: list[tuple[str, object]] = []
+    for kind in _GL_MAKERS:
+        original = getattr(moderngl.Context, kind, None)
+        if original is None:
+            continue
+
+        def maker(self, *args, _original=original, _kind=kind, **kwargs):
+            obj = _original(self, *args, **kwargs)
+            made.append((_kind, obj))
+            return obj
+
+        monkeypatch.setattr(moderngl.Context, kind, maker)
+
+    def live() -> dict[str, int]:
+        counts = collections.Counter(kind for kind, obj in made
+                                     if not isinstance(getattr(obj, "mglo", None), moderngl.InvalidObject))
+        return dict(counts)
+
+    return live
+
+
+def respawn(app, name: str) -> int:
+    """Despawn the scene's entity called ``name`` and spawn it again from the scene's plan (a new entity id, as a
+    hot reload that removes and re-adds it does); returns the new id."""
+    from engine.builtin import find_named
+    from engine.scene import spawn_entity
+
+    app.world.despawn(find_named(app.world, name))
+    index = next(i for i, ent in enumerate(app.plan.entities) if ent.name == name)
+    return spawn_entity(app.world, app.registry, app.plan, index, app.plan.entities[index]).entity

@@ -144,3 +144,9 @@ class RenderFeature:
 
     def release(self) -> None:
         """Free GL objects."""
+
+    def release_texture(self, texture: Any) -> None:
+        """Release a texture this feature made and drew into through ``renderer.framebuffer``: the framebuffers
+        the renderer cached for it go too (``texture.release()`` alone leaves them, keyed by the texture's GL
+        name, which a driver may give to the next texture it makes)."""
+        self.renderer._free_resource(texture)

@@ -201,8 +201,16 @@ class DustDevilParticles(RenderFeature):
         devils = extract_devils(world)
         entities = {d.entity for d in devils}
         for key in [k for k in self._coverage if k[0] not in entities]:  # a dust devil gone: free its images
-            self._coverage.pop(key)[1].release()
+            self.release_texture(self._coverage.pop(key)[1])
             self._unresolved.discard(key)
+        for entity in [e for e in self._buffers if e not in entities]:  # and its particle buffer
+            buf, vaos = self._buffers.pop(entity)
+            for vao in vaos.values():
+                vao.release()
+            buf.release()
+            self._uploaded.pop(entity, None)
+        for key in [k for k in self.declared_repeats if k[0] not in entities]:
+            del self.declared_repeats[key]
         return devils
 
     # -------------------------------------------------------------------------- GL objects
@@ -265,7 +273,7 @@ class DustDevilParticles(RenderFeature):
         if held is not None and held[0] == size:
             return held[1]
         if held is not None:
-            held[1].release()
+            self.release_texture(held[1])
         texture = self.ctx.texture(size, 1, np.zeros(size[0] * size[1], np.uint32).tobytes(), dtype="u4")
         self._coverage[key] = (size, texture)
         self._unresolved.discard(key)
@@ -497,7 +505,7 @@ class DustDevilParticles(RenderFeature):
             vao.release()
         self._resolve.clear()
         for _, texture in self._coverage.values():
-            texture.release()
+            self.release_texture(texture)
         self._coverage.clear()
         self._unresolved.clear()
         if self._ball is not None:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from engine.app import App
-from tests.render_utils import assert_golden, make_renderer, render_app
+from tests.render_utils import assert_golden, make_renderer, render_app, respawn, track_gl_objects
 from tests.systems.dust_devil.helpers import devil, scene_text
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -212,3 +212,29 @@ def test_markers_join_the_static_layer_while_the_field_stays_and_the_pictures_ke
         assert np.array_equal(a, b)
     red = (cached[-1][..., 0].astype(int) - cached[-1][..., 1]) > 80
     assert red.sum() > 4  # the markers are in the picture
+
+
+def test_a_dust_devil_despawned_and_spawned_again_leaves_no_gl_objects_behind(tmp_path, gl_ctx, monkeypatch):
+    """Each respawn is a new entity: its particle buffer, coverage images and the framebuffers the renderer made
+    for them go with the old one (the coverage images' framebuffers were left in the renderer's cache, keyed by
+    a GL name the driver may reuse)."""
+    live = track_gl_objects(monkeypatch)
+    app = app_for(tmp_path, terrain=False, particle_count=200, prewarm_time=0.0, repeats=2, drag_repeats=1)
+    renderer = make_renderer(app, 48, 36)
+    feature = next(f for f in renderer.features if f.name == "dust_devil")
+    try:
+        def cycle():
+            respawn(app, "devil")
+            for _ in range(3):  # the view's static layer is kept from the second frame on
+                app.step(1)
+                app.render_frame()
+
+        cycle()
+        after_one = live()
+        for _ in range(3):
+            cycle()
+        assert live() == after_one
+        assert len(feature._buffers) == len(feature.declared_repeats) == 1
+    finally:
+        renderer.release()
+        app.renderer = None
