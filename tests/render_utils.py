@@ -139,3 +139,23 @@ def respawn(app, name: str) -> int:
     app.world.despawn(find_named(app.world, name))
     index = next(i for i, ent in enumerate(app.plan.entities) if ent.name == name)
     return spawn_entity(app.world, app.registry, app.plan, index, app.plan.entities[index]).entity
+
+
+def gl_objects_per_respawn(app, name: str, live, cycles: int = 4, frames: int = 3, width: int = 48,
+                           height: int = 36) -> list[dict[str, int]]:
+    """Render ``app`` headless while the entity called ``name`` is respawned ``cycles`` times (``frames`` frames
+    after each: a view keeps its static layer from its second frame on); returns ``live()``
+    (:func:`track_gl_objects`) after each cycle: the same counts every time unless something leaks."""
+    renderer = make_renderer(app, width, height)
+    counts = []
+    try:
+        for _ in range(cycles):
+            respawn(app, name)
+            for _ in range(frames):
+                app.step(1)
+                app.render_frame()
+            counts.append(live())
+    finally:
+        renderer.release()
+        app.renderer = None
+    return counts

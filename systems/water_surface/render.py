@@ -67,6 +67,8 @@ class WaterFeature(RenderFeature):
             if cfg.wireframe:
                 item["wire"] = wire_arrays(vertices[:, :3], mesh).astype(np.float32)
             out.append(item)
+        for entity in [e for e in self._buffers if e not in self._meshes]:  # despawned surfaces
+            self._buffers.pop(entity).release()
         return out
 
     def _upload(self, item: dict[str, Any]) -> _Buffers:
