@@ -676,6 +676,9 @@ class GrassFieldFeature(RenderFeature):
         alive = {frame.entity for frame in out}
         for entity in [e for e in self.fields if e not in alive]:  # despawned fields
             self.fields.pop(entity).release()
+        for per_view in (self.orientations, self.plans):
+            for key in [k for k in per_view if k[0] not in alive]:
+                del per_view[key]
         return out
 
     def gpu(self, frame: FieldFrame) -> FieldGpu:

@@ -8,7 +8,7 @@ import pytest
 
 from components.grass_field import GrassFieldState
 from engine.app import App
-from tests.render_utils import assert_golden, make_renderer, render_app
+from tests.render_utils import assert_golden, make_renderer, render_app, respawn
 from tests.systems.grass_field.helpers import scene_text, write_scene
 
 SMALL = 'preset = "grass_field/paper"\nplants_per_cell = 16\ncell_variants = 3\nplant_variants = 4\n'
@@ -250,3 +250,21 @@ def test_blended_views_variant_renders_like_the_swap_rule(tmp_path):
         extra = "debug_levels = true\n" if debug else ""
         render_app(_app(tmp_path, grass + "blend_views = true\n" + extra, camera, name=f"d{debug}.toml"), 32, 24)
     assert 0.0 < np.abs(plain - blended).mean() < 6.0  # rectangles differ only where two views are mixed
+
+
+def test_a_field_despawned_and_spawned_again_leaves_no_per_view_state_behind(tmp_path):
+    """Each respawn is a new entity: the old one's impostor orientations and frame plans (per entity and view,
+    sized by its cells) go with its GL resources instead of piling up."""
+    app = _app(tmp_path, SMALL + "grid_x = 4\ngrid_z = 4\n", _camera((0.0, 24.0, 40.0), pitch=-22.0), terrain=False)
+    renderer = make_renderer(app, 48, 36)
+    try:
+        for _ in range(3):
+            entity = respawn(app, "grass")
+            app.step(1)
+            app.render_frame()
+            feature = _feature(app)
+            assert set(feature.orientations) == set(feature.plans) == {(entity, "view0")}
+            assert list(feature.fields) == [entity]
+    finally:
+        renderer.release()
+        app.renderer = None
