@@ -155,6 +155,10 @@ class ToonSmokeFeature(RenderFeature):
                                   (tuple(map(tuple, cfg.ramp_colors)), tuple(cfg.ramp_positions)),
                                   cfg.outline_width, tuple(cfg.outline_color), cfg.outline_depth_threshold,
                                   obstacle, (lo, hi)))
+        exposure = float(self.renderer.settings.exposure)
+        used = {(draw.ramp, exposure) for draw in out}
+        for key in [k for k in self._ramps if k not in used]:  # a ramp or exposure edited away, volumes gone
+            self._ramps.pop(key).release()
         return out
 
     # ---------------------------------------------------------------- resources

@@ -163,3 +163,20 @@ def test_every_volume_is_drawn_with_its_outline_past_the_outline_batch(tmp_path)
     last = _frame(app)
     assert (np.abs(alone - np.asarray(alone[0, 0])).max(axis=-1) > 40).sum() > 500  # the smoke is on screen
     assert np.abs(last - alone).max() <= 2
+
+
+def test_ramp_textures_of_earlier_exposures_are_released(tmp_path):
+    """A ramp texture is made per (ramp, exposure): one edited away (a hot reload of the exposure or the colours)
+    is released, not kept for the rest of the session."""
+    app = make_app(tmp_path, scene_text("paper"))
+    renderer = make_renderer(app, 48, 36)
+    feature = next(f for f in renderer.features if f.name == "toon_smoke")
+    try:
+        app.step(3)  # a mesh to draw
+        for exposure in (1.0, 1.5, 2.0, 2.5):
+            renderer.use_settings(renderer.settings.model_copy(update={"exposure": exposure}))
+            app.render_frame()
+            assert [exposure_of for _, exposure_of in feature._ramps] == [exposure]
+    finally:
+        renderer.release()
+        app.renderer = None
