@@ -277,6 +277,11 @@ class EnergyWaveFeature(RenderFeature):
 
     # ------------------------------------------------------------------------------------------ extraction
     def extract(self, world: World) -> FrameData:
+        from engine.render.components import Camera
+
+        cameras = {entity for entity, _ in world.query(Camera)}
+        for camera in [c for c in self._half_depth if c and c not in cameras]:  # a camera gone: free its depth
+            self.release_texture(self._half_depth.pop(camera).texture)
         return extract_frame(world)
 
     # ------------------------------------------------------------------------------------------- GL objects
@@ -513,7 +518,7 @@ class EnergyWaveFeature(RenderFeature):
         off); None otherwise, and what was kept for the camera is released."""
         kept = self._half_depth.get(view.camera_entity)
         if kept is not None and (key is None or kept.texture.size != size):
-            self._half_depth.pop(view.camera_entity).texture.release()
+            self.release_texture(self._half_depth.pop(view.camera_entity).texture)
             kept = None
         if key is None:
             return None
@@ -523,9 +528,11 @@ class EnergyWaveFeature(RenderFeature):
 
     def release(self) -> None:
         for obj in (self._records, self._indices, *self._points.values(), *self._quads.values(),
-                    *self._fullscreen.values(), *(kept.texture for kept in self._half_depth.values())):
+                    *self._fullscreen.values()):
             if obj is not None:
                 obj.release()
+        for kept in self._half_depth.values():
+            self.release_texture(kept.texture)  # drawn into through renderer.framebuffer
         self._half_depth.clear()
         self._records = self._indices = None
         self._index_sprites = 0

@@ -534,3 +534,15 @@ def test_the_glow_buffer_is_the_nine_tap_gaussian_of_the_particle_buffer(tmp_pat
                    for j, w in zip(range(-4, 5), weights))
     assert np.abs(glow - expected).max() <= 1e-4 * particles.max()
     assert render.blur_taps(radius, 80, 40)[0].size < 9 and render.blur_taps(radius, 30, 30)[0].size < 9
+
+
+def test_the_half_depth_kept_for_a_camera_goes_with_the_camera(tmp_path, monkeypatch):
+    """The half-resolution depth kept per camera (keep_half_depth) is released when the camera is despawned, with
+    the framebuffer the renderer made for it; it stayed, one depth texture and one framebuffer per camera gone."""
+    from tests.render_utils import gl_objects_per_respawn, track_gl_objects
+
+    live = track_gl_objects(monkeypatch)
+    app = scene_app(tmp_path, "reference")
+    app.step(10)
+    counts = gl_objects_per_respawn(app, "camera", live, cycles=3, frames=5)  # drawn, drawn, stored, restored x 2
+    assert counts[1:] == counts[:1] * (len(counts) - 1)
