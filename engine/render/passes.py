@@ -180,7 +180,7 @@ def sun_rect(view: View, sun_dir: np.ndarray, min_cos: float) -> tuple[float, fl
 class _TerrainMesh:
     key: tuple
     chunks: TerrainChunks
-    vaos: dict  # program -> its vertex array (the shader variants: per-pixel or per-vertex shade, shadows, texture)
+    vaos: dict  # (vertex_shade, textured, shadows) -> the vertex array of that shader variant
     vbo: moderngl.Buffer
     ibo: moderngl.Buffer
     shade: moderngl.Texture  # rgba8, one texel per grid point: sqrt(baked diffuse + ambient light × albedo / scale)
@@ -217,9 +217,11 @@ class TerrainFeature(RenderFeature):
     def extract(self, world) -> list:
         out = []
         for entity, (terrain, t) in world.query(Terrain, Transform):
-            key = (id(terrain.field.heights), terrain.field.heights.shape, terrain.field.spacing,
+            key = (Identity(terrain.field.heights), terrain.field.heights.shape, terrain.field.spacing,
                    terrain.texture is not None)
             out.append((entity, key, terrain, t.matrix().astype(np.float32)))
+        for entity in [e for e in self._meshes if e not in {item[0] for item in out}]:  # terrains gone
+            self._meshes.pop(entity).release()
         return out
 
     def static_key(self, view: View, data) -> Any:
@@ -330,9 +332,12 @@ class TerrainFeature(RenderFeature):
                         set_uniforms(prog, **lighting, **detail, **uniforms, model=model.T.copy(), shade_map=0,
                                      shade_scale=mesh.shade_scale, uv_scale=mesh.chunks.uv_scale,
                                      uv_offset=mesh.chunks.uv_offset)
-                        vao = mesh.vaos.get(prog)  # the object, not its GL name (reused after a shader reload)
-                        if vao is None:
-                            vao = mesh.vaos[prog] = self.ctx.vertex_array(
+                        variant = (vertex_shade, textured, shadow_defines if in_shadow else ())
+                        vao = mesh.vaos.get(variant)
+                        if vao is None or vao.program is not prog:  # new, or its shader was reloaded (F5)
+                            if vao is not None:
+                                vao.release()
+                            vao = mesh.vaos[variant] = self.ctx.vertex_array(
                                 prog, [(mesh.vbo, "3f 3f 1f", "in_position", "in_normal", "in_skirt")], mesh.ibo,
                                 index_element_size=4)
                         for first, count in ranges:
@@ -374,8 +379,27 @@ def _detail_key(terrain: Terrain) -> tuple:
     with the component), the strength and the tile size; () without one."""
     if terrain.texture is None:
         return ()
-    return (id(terrain.texture), terrain.texture.shape, terrain.config.texture_strength,
+    return (Identity(terrain.texture), terrain.texture.shape, terrain.config.texture_strength,
             terrain.config.texture_size)
+
+
+class Identity:
+    """A key part that is equal only to a key part of the same object, and keeps that object alive: ``id(obj)``
+    alone may be given to a new object once the first is freed, and a cache keyed by it would show stale data."""
+
+    __slots__ = ("obj",)
+
+    def __init__(self, obj: Any) -> None:
+        self.obj = obj
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Identity) and other.obj is self.obj
+
+    def __hash__(self) -> int:
+        return id(self.obj)
+
+    def __repr__(self) -> str:
+        return f"Identity({type(self.obj).__name__} at {id(self.obj):#x})"
 
 
 # ------------------------------------------------------------------------- meshes
@@ -497,12 +521,15 @@ class MeshFeature(RenderFeature):
             buf = self.ctx.buffer(reserve=max(needed, 64 * self.INSTANCE_FLOATS * 4))
             self._instances[shape] = buf
         vaos, vbo, ibo = self._geometry_of(shape)
-        if defines not in vaos:
-            prog = self.renderer.load_program(SHADERS, "mesh", defines)
-            vaos[defines] = self.ctx.vertex_array(prog, [(vbo, "3f 3f", "in_position", "in_normal"),
-                                                         (buf, "4f 4f 4f 4f 4f/i", "m0", "m1", "m2", "m3",
-                                                          "in_color")], ibo)
-        return vaos[defines]
+        prog = self.renderer.load_program(SHADERS, "mesh", defines)
+        built = vaos.get(defines)
+        if built is None or built.program is not prog:  # new, or its shader was edited and reloaded (F5)
+            if built is not None:
+                built.release()
+            built = vaos[defines] = self.ctx.vertex_array(prog, [(vbo, "3f 3f", "in_position", "in_normal"),
+                                                                 (buf, "4f 4f 4f 4f 4f/i", "m0", "m1", "m2", "m3",
+                                                                  "in_color")], ibo)
+        return built
 
     def _shadow_vao(self, shape: str, count: int) -> moderngl.VertexArray:
         """The shape's depth-only VAO over its shadow instance buffer (grown as needed)."""
@@ -513,9 +540,11 @@ class MeshFeature(RenderFeature):
                 buf.release()
                 self._shadow_vaos.pop(shape).release()
             buf = self._shadow_instances[shape] = self.ctx.buffer(reserve=max(needed, 64 * self.INSTANCE_FLOATS * 4))
+        prog = self.renderer.load_program(SHADERS, "shadow_mesh")
+        if shape in self._shadow_vaos and self._shadow_vaos[shape].program is not prog:  # reloaded shader
+            self._shadow_vaos.pop(shape).release()
         if shape not in self._shadow_vaos:
             _, vbo, ibo = self._geometry_of(shape)
-            prog = self.renderer.load_program(SHADERS, "shadow_mesh")
             self._shadow_vaos[shape] = self.ctx.vertex_array(
                 prog, [(vbo, "3f 12x", "in_position"), (buf, "4f 4f 4f 4f 16x/i", "m0", "m1", "m2", "m3")], ibo)
         return self._shadow_vaos[shape]
@@ -577,7 +606,7 @@ def shadow_key(view: View) -> Any:
 def _fullscreen(renderer: Renderer, frag: str, defines: tuple[str, ...] = ()) -> moderngl.VertexArray:
     from engine.render.renderer import _with_defines, shader_source
 
-    cache = renderer.__dict__.setdefault("_fullscreen_vaos", {})
+    cache = renderer.fullscreen_vaos
     vao = cache.get((frag, defines))
     if vao is None:
         prog = renderer.program(shader_source(SHADERS / "fullscreen.vert"),

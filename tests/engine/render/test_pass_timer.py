@@ -42,3 +42,36 @@ def test_cpu_mode_finishes_after_every_pass():
     timer.wrap("a", lambda pc: None)(None)
     timer.wrap("b", lambda pc: None)(None)
     assert ctx.finishes == 2 and set(timer.totals) == {"a", "b"} and not timer.wait_totals
+
+
+class _Query:
+    elapsed = 1_000_000
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+
+class _QueryCtx(_Ctx):
+    def __init__(self) -> None:
+        super().__init__()
+        self.queries = 0
+
+    def query(self, time: bool = False):
+        self.queries += 1
+        return _Query()
+
+
+def test_gpu_mode_reuses_one_timer_query_per_pass():
+    """moderngl cannot release a query: one made per pass and frame grew memory by megabytes a minute with the
+    profiler on."""
+    ctx = _QueryCtx()
+    timer = PassTimer(ctx)
+    timer.enabled, timer.gpu = True, True
+    passes = [timer.wrap(name, lambda pc: None) for name in ("terrain", "sky")]
+    for _ in range(5):
+        for execute in passes:
+            execute(None)
+    assert ctx.queries == 2 and timer.totals == {"terrain": 5.0, "sky": 5.0}

@@ -122,10 +122,8 @@ def test_render_scale_tone_maps_at_view_size_then_upscales():
         app = App(SCENE)
         app.config.render.render_scale = scale
         renderer = make_renderer(app, 160, 96)
-        images[scale] = np.asarray(render_app(app, frames=1), np.float32)
-        order = renderer.declare().compile().order
-        renderer.release()
-        app.renderer = None
+        images[scale] = np.asarray(render_app(app, frames=1), np.float32)  # releases the renderer
+        order = renderer.graph.compile().order  # the last frame's passes (a cached compile: no GL)
         assert ("tonemap.view0" in order) == (scale < 1.0)
         assert "present.view0" in order
     assert np.abs(images[1.0] - images[0.5]).mean() < 3.0  # 0.8 measured; an untoned or unscaled view is far off
@@ -405,3 +403,36 @@ def test_reading_the_image_before_the_first_frame_is_an_error_not_a_black_pictur
     finally:
         renderer.release()
         app.renderer = None
+
+
+def test_a_respawned_terrain_leaves_no_gl_objects_behind(monkeypatch):
+    """A hot reload that removes and re-adds the terrain: its mesh (buffers, shade texture, vertex arrays) was
+    kept per entity id for the whole session."""
+    from tests.render_utils import gl_objects_per_respawn, track_gl_objects
+
+    live = track_gl_objects(monkeypatch)
+    counts = gl_objects_per_respawn(App(SCENE), "ground", live)
+    assert counts[1:] == counts[:1] * (len(counts) - 1)
+
+
+def test_terrain_cache_keys_hold_their_arrays_not_their_ids():
+    """id() of a freed array can be given to the next one: a key made of it would bring back a stale mesh."""
+    from engine.render.passes import Identity
+
+    a = np.zeros((3, 3))
+    assert Identity(a) == Identity(a) and hash(Identity(a)) == hash(Identity(a))
+    assert Identity(a) != Identity(a.copy()) and Identity(a) != id(a)
+
+
+def test_release_frees_every_gl_object_the_renderer_made(monkeypatch):
+    from tests.render_utils import track_gl_objects
+
+    live = track_gl_objects(monkeypatch)
+    app = App(SCENE)
+    renderer = make_renderer(app, 64, 48)
+    for _ in range(3):
+        app.step(1)
+        app.render_frame()
+    renderer.release()
+    app.renderer = None
+    assert {kind: n for kind, n in live().items() if n} == {}
