@@ -597,9 +597,11 @@ def instance_bounds(inst: np.ndarray) -> np.ndarray:
 
 
 def shadow_key(view: View) -> Any:
-    """What a shadow-receiving feature's static key includes: the content of the view's shadow map."""
+    """What a shadow-receiving feature's static key includes: the content of the view's shadow map and how
+    receivers read it (filter, normal offset, fade distance: ``[render]`` settings a hot reload may change while
+    the map stays the same)."""
     shadow = view.extra.get("shadow")
-    return None if shadow is None else shadow.key
+    return None if shadow is None else (shadow.key, shadow.soft, shadow.normal_offset, shadow.distance)
 
 
 # ----------------------------------------------------------- tone map, composite

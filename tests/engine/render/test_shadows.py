@@ -193,3 +193,26 @@ def test_the_light_box_keeps_its_size_as_the_camera_turns_and_moves_in_whole_tex
     assert 0.013 < texel  # the camera moved less than a texel, so the box across the light moved 0 or 1 texel
     shift = (b[3] - a[3]) / texel
     assert np.allclose(shift, np.round(shift), atol=1e-6) and np.abs(shift).max() <= 1.0 + 1e-9
+
+
+@pytest.mark.parametrize("change", [{"shadow_filter": "soft"}, {"shadow_bias": 8.0}])
+def test_the_static_layer_is_redrawn_when_a_reload_changes_how_receivers_read_the_map(tmp_path, change):
+    """The map stays the same (same light box and casters), but the receivers' filter or normal offset changed:
+    a static layer kept from before would show the old shadows."""
+    path = _scene(tmp_path, render='shadow_filter = "hard"')
+    text = open(path).read().replace("static_layer_cache = false", "static_layer_cache = true")
+    open(path, "w").write(text)
+    images = []
+    for frames_before in (3, 0):
+        app = App(path)
+        renderer = make_renderer(app, 96, 96)
+        try:
+            for _ in range(frames_before):
+                app.render_frame()
+            renderer.use_settings(renderer.settings.model_copy(update=change))
+            app.render_frame()
+            images.append(np.asarray(renderer.read_image()).astype(int))
+        finally:
+            renderer.release()
+            app.renderer = None
+    assert np.abs(images[0] - images[1]).max() <= 1
