@@ -79,13 +79,18 @@ def may_be_shadowed(shadow: Shadow | None, boxes: np.ndarray) -> np.ndarray:
     """(m,) bool: which world boxes (m, 2, 3) a shadow of this frame's casters may fall on: seen along the
     light, the box overlaps a caster's box and the map, and reaches farther from the sun than the caster's
     nearest point.  Receivers draw the others with their plain shader (receiver culling: on a software
-    rasteriser the shadow look-up is paid per pixel)."""
+    rasteriser the shadow look-up is paid per pixel).
+
+    A shadow reaches past its caster's box across the light by what ``shadow.glsl`` adds: the look-up point
+    moved along the normal (``normal_offset``) and the filter's reach (the bilinear comparison takes texels up
+    to one away, the four taps one more), so the casters' boxes grow by that much plus half a texel."""
     boxes = np.asarray(boxes, np.float64).reshape(-1, 2, 3)
     if shadow is None or len(boxes) == 0:
         return np.zeros(len(boxes), bool)
     r = light_boxes(shadow.basis, boxes)[:, None]  # (m, 1, 2, 3)
     c = shadow.caster_boxes[None]  # (1, n, 2, 3)
-    across = np.all((r[..., 0, :2] <= c[..., 1, :2]) & (r[..., 1, :2] >= c[..., 0, :2]), axis=-1)
+    reach = shadow.normal_offset + (2.5 if shadow.soft else 1.5) * shadow.texel
+    across = np.all((r[..., 0, :2] <= c[..., 1, :2] + reach) & (r[..., 1, :2] >= c[..., 0, :2] - reach), axis=-1)
     behind = r[..., 1, 2] > c[..., 0, 2]
     inside = np.all((r[:, 0, 0, :2] <= shadow.extent[1]) & (r[:, 0, 1, :2] >= shadow.extent[0]), axis=-1)
     return np.any(across & behind, axis=1) & inside

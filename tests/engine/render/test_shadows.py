@@ -216,3 +216,21 @@ def test_the_static_layer_is_redrawn_when_a_reload_changes_how_receivers_read_th
             renderer.release()
             app.renderer = None
     assert np.abs(images[0] - images[1]).max() <= 1
+
+
+def test_receiver_culling_does_not_cut_the_filtered_edge_of_a_shadow_at_a_chunk_border(tmp_path, monkeypatch):
+    """A box whose shadow ends 5 cm before the border between two terrain chunks (x = 0): the four-tap filter
+    and the bilinear comparison spread its edge over about two texels (0.2 m each here), into the next chunk,
+    which must take the look-up too.  Culling is an optimisation: the picture is the one without it."""
+    import engine.render.passes as passes
+
+    path = _scene(tmp_path, render='shadow_filter = "soft"\nshadow_map_size = 256')
+    text = open(path).read().replace("size_exponent = 4", "size_exponent = 5").replace("ortho_height = 8.0",
+                                                                                    "ortho_height = 3.0")
+    text = text.replace(f"sun_direction = [{SUN[0]}, {SUN[1]}, {SUN[2]}]", "sun_direction = [0.0, 1.0, 0.0]")
+    open(path, "w").write(text.replace("position = [0.0, 2.0, 0.0]", "position = [-0.55, 2.0, 0.0]"))
+    culled, _, _, _ = _render(path)
+    monkeypatch.setattr(passes, "may_be_shadowed", lambda shadow, boxes: np.ones(len(boxes), bool))
+    every, _, _, _ = _render(path)
+    assert not np.array_equal(every, _render(path, shadows=False)[0])
+    assert np.abs(culled - every).max() <= 1.0
