@@ -88,9 +88,11 @@ class RenderSettings(ConfigModel):
                                                     "hardware GPU, 1024 on a software rasteriser (clearing and "
                                                     "sampling the map are CPU work there).")
     shadow_distance: float = Field(50.0, gt=0.0, le=10000.0,
-                                   description="Shadows cover each view's frustum out to this distance in metres "
-                                               "and fade out over its last fifth; a smaller distance gives sharper "
-                                               "shadows (the same texels over less ground).")
+                                   description="Shadows cover each view's frustum out to this distance "
+                                               "in metres and fade out over its last fifth; a smaller distance gives "
+                                               "sharper shadows (the same texels over less ground). Orthographic "
+                                               "views too: a map camera high above the ground needs a distance "
+                                               "beyond its height, or Camera shadows = false.")
     shadow_filter: Literal["auto", "hard", "soft"] = Field(
         "auto", description="hard: one depth comparison filtered bilinearly (2 x 2 texels); soft: four of them "
                             "spread over 4 x 4 texels (percentage-closer filtering); auto: soft on a hardware "
