@@ -119,9 +119,13 @@ def pcg_hash(v: np.ndarray | int) -> np.ndarray:
         return (word >> np.uint32(22)) ^ word
 
 
-def frame_key(frame_index: int) -> int:
-    """The shaders' ``frame_key`` uniform of a frame: a hash of its index, so every frame draws a new ensemble."""
-    return int(pcg_hash(np.uint32(frame_index % 2**32)))
+def frame_key(tick: int, drawn: int = 0) -> int:
+    """The shaders' ``frame_key`` uniform of a frame: a hash of the world's tick it shows and of the frames drawn
+    at that tick before it (``drawn``), so every frame draws a new ensemble (a paused game's too) and a frame is a
+    function of the state it shows: a run restored from a snapshot, or another frame rate, draws the same picture
+    at the same tick."""
+    with np.errstate(over="ignore"):
+        return int(pcg_hash(np.uint32(tick % 2**32) ^ pcg_hash(np.uint32(drawn % 2**32))))
 
 
 def sample_indices(particles: int, samples: int, key: int) -> np.ndarray:
@@ -195,9 +199,18 @@ class DustDevilParticles(RenderFeature):
         # (entity, view) -> (size, texture): the persistent coverage words, zero between frames
         self._coverage: dict[tuple[int, str], tuple[tuple[int, int], moderngl.Texture]] = {}
         self._unresolved: set[tuple[int, str]] = set()  # coverage scattered into but not resolved (zeroed) yet
+        self._tick, self._drawn_at_tick = -1, 0  # the tick extracted last, and the frames extracted at it before
+
+    @property
+    def frame_key(self) -> int:
+        """This frame's ``frame_key`` (:func:`frame_key` of the tick extracted and the frames drawn at it before)."""
+        return frame_key(self._tick, self._drawn_at_tick)
 
     def extract(self, world) -> list[DevilFrame]:
         self._seed = int(world.random.seed)
+        tick = int(world.tick)
+        self._drawn_at_tick = self._drawn_at_tick + 1 if tick == self._tick else 0
+        self._tick = tick
         devils = extract_devils(world)
         entities = {d.entity for d in devils}
         for key in [k for k in self._coverage if k[0] not in entities]:  # a dust devil gone: free its images
@@ -374,7 +387,7 @@ class DustDevilParticles(RenderFeature):
             scene_depth.use(0)
             coverage.bind_to_image(0, read=True, write=True, format=GL_R32UI)
             uniforms = dict(view_proj=view.view_proj.T.copy(), sub_particles=devil.sub_particles,
-                            frame_key=frame_key(self.renderer.frame_index), radius=devil.radius,
+                            frame_key=self.frame_key, radius=devil.radius,
                             point_size=devil.point_size, view_size=(view.width, view.height), scene_depth=0)
             if self.compute:
                 n = len(devil.positions)
@@ -482,7 +495,7 @@ class DustDevilParticles(RenderFeature):
             scene_depth.use(0)
             vao = self._vao(devil, "pbvr")
             self._bind_ball(vao.program)
-            key = frame_key(self.renderer.frame_index)
+            key = self.frame_key
             for r in range(devil.repeats):
                 set_uniforms(vao.program, view_proj=view.view_proj.T.copy(), sub_particles=devil.sub_particles,
                              repeat_index=r, frame_key=key, radius=devil.radius,

@@ -17,7 +17,8 @@ uint pcg_hash(uint v) {     // Jarzynski & Olano 2020, "Hash Functions for GPU R
     return (word >> 22u) ^ word;
 }
 
-// The table index of a particle's sample 0 this frame (frame_key: pcg_hash of the frame index, set by render.py).
+// The table index of a particle's sample 0 this frame (frame_key: a hash of the tick drawn and the frames drawn at it
+// before, set by render.py).
 uint particle_key(int particle, uint frame_key) {
     return pcg_hash(uint(particle) + frame_key);
 }

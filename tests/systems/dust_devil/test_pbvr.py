@@ -121,7 +121,7 @@ def rendered_counts(tmp_path, pbvr_path: str, repeats: int, name: str, point_siz
         graph.add_pass("test.read_pbvr", setup, execute, side_effect=True)
         graph.execute()
         ref = reference_counts(devil.positions, view.view_proj, out["depth"], repeats, devil.sub_particles,
-                               frame_key(renderer.frame_index), devil.radius, devil.point_size,
+                               feature.frame_key, devil.radius, devil.point_size,
                                app.world.random.seed)
     finally:
         feature.add_passes = add_passes

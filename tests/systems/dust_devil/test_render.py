@@ -238,3 +238,31 @@ def test_a_dust_devil_despawned_and_spawned_again_leaves_no_gl_objects_behind(tm
     finally:
         renderer.release()
         app.renderer = None
+
+
+def test_a_restored_run_draws_the_same_pbvr_picture_at_the_same_tick(tmp_path, gl_ctx):
+    """The PBVR ensemble is drawn from the tick (and the frames already drawn at it), not from how many frames the
+    renderer drew: a run restored from a snapshot (App.restore) shows the picture the original showed at that tick,
+    bit for bit.  It was keyed by the renderer's frame count, which a restore does not rewind."""
+    app = app_for(tmp_path, particle_count=200, prewarm_time=0.2, show_markers=False)
+    renderer = make_renderer(app, 64, 48)
+    try:
+        app.step(1)
+        app.render_frame()
+        snap = app.snapshot()
+        pictures = []
+        for _ in range(2):
+            for _ in range(3):
+                app.step(1)
+                app.render_frame()
+            pictures.append(np.asarray(renderer.read_image()))
+            app.restore(snap)
+        paused = []
+        for _ in range(2):  # frames drawn at one tick (a paused game) still draw new ensembles
+            app.render_frame()
+            paused.append(np.asarray(renderer.read_image()))
+    finally:
+        renderer.release()
+        app.renderer = None
+    assert pictures[0].any() and np.array_equal(pictures[0], pictures[1])
+    assert not np.array_equal(paused[0], paused[1])
