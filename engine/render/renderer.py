@@ -367,7 +367,7 @@ class Renderer:
         if (width, height) != (self.width, self.height):
             self.width, self.height = width, height
             self._resize_final()
-            self.graph.pool.trim(0)
+            self.graph.pool.clear()  # the old size's targets (nothing is checked out between frames)
 
     def _resize_final(self) -> None:
         if self._final is not None:
