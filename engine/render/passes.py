@@ -220,7 +220,8 @@ class TerrainFeature(RenderFeature):
             key = (Identity(terrain.field.heights), terrain.field.heights.shape, terrain.field.spacing,
                    terrain.texture is not None)
             out.append((entity, key, terrain, t.matrix().astype(np.float32)))
-        for entity in [e for e in self._meshes if e not in {item[0] for item in out}]:  # terrains gone
+        drawn = {item[0] for item in out}
+        for entity in [e for e in self._meshes if e not in drawn]:  # terrains gone
             self._meshes.pop(entity).release()
         return out
 
@@ -321,18 +322,19 @@ class TerrainFeature(RenderFeature):
                                        view.height, view.ortho, terrain.config.lod_pixels)
                 mesh.shade.use(0)
                 # receiver culling: only the chunks a caster's shadow may reach pay for the shadow look-up
-                receives = may_be_shadowed(shadow, chunk_boxes(mesh.chunks, model))
+                receives = (np.zeros(len(levels), bool) if shadow is None
+                            else may_be_shadowed(shadow, chunk_boxes(mesh.chunks, model)))
                 self.last_chunks[view.name] += int((levels >= 0).sum())
                 self.last_shadowed[view.name] += int(((levels >= 0) & receives).sum())
                 for in_shadow in (False, True):
                     part = np.where(receives == in_shadow, levels, -1)
-                    uniforms = shadow_uniforms if in_shadow else {}
+                    shadows, uniforms = (shadow_defines, shadow_uniforms) if in_shadow else ((), {})
                     for ranges, vertex_shade in self._batches(mesh, part):
-                        prog = self._program(vertex_shade, textured, shadow_defines if in_shadow else ())
+                        prog = self._program(vertex_shade, textured, shadows)
                         set_uniforms(prog, **lighting, **detail, **uniforms, model=model.T.copy(), shade_map=0,
                                      shade_scale=mesh.shade_scale, uv_scale=mesh.chunks.uv_scale,
                                      uv_offset=mesh.chunks.uv_offset)
-                        variant = (vertex_shade, textured, shadow_defines if in_shadow else ())
+                        variant = (vertex_shade, textured, shadows)
                         vao = mesh.vaos.get(variant)
                         if vao is None or vao.program is not prog:  # new, or its shader was reloaded (F5)
                             if vao is not None:

@@ -575,10 +575,11 @@ class Renderer:
             self._free_shadow(camera)
             return
         size = self.shadow_map_size
-        boxes = np.concatenate([np.asarray(c.boxes, np.float64).reshape(-1, 2, 3) for c in casters])
-        bounds = np.array([boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)])
-        light_view_proj, matrix, texel, extent = fit_light(view, self.sun_direction, self.settings.shadow_distance,
-                                                           size, bounds)
+        basis = light_basis(self.sun_direction)
+        caster_boxes = light_boxes(basis, np.concatenate([np.asarray(c.boxes, np.float64).reshape(-1, 2, 3)
+                                                          for c in casters]))
+        light_view_proj, matrix, texel, extent = fit_light(view, basis, self.settings.shadow_distance, size,
+                                                           float(caster_boxes[:, 0, 2].min()))
         key = (size, light_view_proj.tobytes(), tuple(c.key for c in casters))
         kept = self._shadow_maps.get(camera)
         if kept is None or kept.size != size:
@@ -612,10 +613,9 @@ class Renderer:
 
             graph.add_pass(f"shadow.{view.name}", setup, execute)
             handle = written[0]
-        basis = np.array(light_basis(self.sun_direction))
         view.extra["shadow"] = Shadow(handle, matrix, light_view_proj, texel,
                                       float(self.settings.shadow_bias) * texel, float(self.settings.shadow_distance),
-                                      size, self.soft_shadows, key, basis, light_boxes(basis, boxes), extent)
+                                      size, self.soft_shadows, key, basis, caster_boxes, extent)
 
     def _free_shadow(self, camera: int) -> None:
         kept = self._shadow_maps.pop(camera, None)

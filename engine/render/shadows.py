@@ -96,14 +96,14 @@ def may_be_shadowed(shadow: Shadow | None, boxes: np.ndarray) -> np.ndarray:
     return np.any(across & behind, axis=1) & inside
 
 
-def light_basis(sun_direction: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(right, up, towards the sun) orthonormal, float64: the light's view axes."""
+def light_basis(sun_direction: np.ndarray) -> np.ndarray:
+    """(3, 3) float64 rows: right, up, towards the sun (orthonormal): the light's view axes."""
     toward = np.asarray(sun_direction, np.float64)
     toward = toward / math.sqrt(float(toward @ toward))
     helper = np.array([0.0, 1.0, 0.0]) if abs(toward[1]) < 0.99 else np.array([1.0, 0.0, 0.0])
     right = np.cross(helper, toward)
     right /= math.sqrt(float(right @ right))
-    return right, np.cross(toward, right), toward
+    return np.array([right, np.cross(toward, right), toward])
 
 
 def frustum_sphere(view: View, distance: float) -> tuple[np.ndarray, float]:
@@ -131,11 +131,13 @@ def frustum_sphere(view: View, distance: float) -> tuple[np.ndarray, float]:
     return centre, radius
 
 
-def fit_light(view: View, sun_direction: np.ndarray, distance: float, size: int,
-              caster_bounds: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
+def fit_light(view: View, basis: np.ndarray, distance: float, size: int,
+              nearest_caster: float | None) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
     """(light_view_proj, texture matrix, texel size, extent) of the view's shadow map: float32 matrices (see the
-    module docstring for the fit) and the map's box across the light, (2, 2) min and max of right and up."""
-    right, up, toward = light_basis(sun_direction)
+    module docstring for the fit) and the map's box across the light, (2, 2) min and max of right and up.
+    ``basis``: :func:`light_basis`; ``nearest_caster``: the depth from the sun of the casters' nearest point (their
+    :func:`light_boxes`' smallest depth), None without casters."""
+    right, up, toward = basis
     centre, radius = frustum_sphere(view, distance)
     half = radius * size / (size - 2)  # one texel of margin: the snapped box still holds the whole sphere
     texel = 2.0 * half / size
@@ -143,11 +145,8 @@ def fit_light(view: View, sun_direction: np.ndarray, distance: float, size: int,
     cy = math.floor(float(centre @ up) / texel) * texel
     depth_centre = -float(centre @ toward)  # depth grows away from the sun
     near, far = depth_centre - radius, depth_centre + radius
-    if caster_bounds is not None:
-        lo, hi = np.asarray(caster_bounds, np.float64)
-        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-        nearest = float(np.min(-(corners @ toward)))
-        near = max(min(near, nearest - 0.01 * radius), depth_centre - radius - DEPTH_REACH)
+    if nearest_caster is not None:
+        near = max(min(near, float(nearest_caster) - 0.01 * radius), depth_centre - radius - DEPTH_REACH)
     m = np.zeros((4, 4))
     m[0, :3], m[0, 3] = right / half, -cx / half  # the box: [cx - half, cx + half] across the light
     m[1, :3], m[1, 3] = up / half, -cy / half
@@ -163,7 +162,7 @@ def fit_light(view: View, sun_direction: np.ndarray, distance: float, size: int,
 def receiver_uniforms(shadow: Shadow | None, pc) -> tuple[tuple[str, ...], dict]:
     """In a receiving pass's execute: binds the view's shadow map (``pc`` the pass context) and returns the
     program defines (``SHADOWS``, ``SHADOW_SOFT``) and the uniforms ``shadow.glsl`` reads; ``((), {})`` when
-    the view has no shadow map this frame.  The pass must have declared ``b.read(shadow.texture)``."""
+    the view has no shadow map this frame.  The pass's setup must have called :func:`read_shadow`."""
     if shadow is None:
         return (), {}
     pc.get(shadow.texture).use(SHADOW_UNIT)

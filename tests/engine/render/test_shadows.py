@@ -7,7 +7,7 @@ import pytest
 from engine.app import App
 from engine.builtin import find_named
 from engine.render.feature import View
-from engine.render.shadows import fit_light, frustum_sphere, may_be_shadowed
+from engine.render.shadows import fit_light, frustum_sphere, light_basis, may_be_shadowed
 from engine.spatial import Transform
 from tests.render_utils import make_renderer
 
@@ -140,10 +140,10 @@ def test_a_still_scene_draws_its_map_once_and_a_moving_caster_redraws_it(tmp_pat
 def test_receiver_culling_marks_only_what_a_shadow_can_reach():
     basis_sun = np.array([0.0, 1.0, 0.0])  # the sun straight above: shadows fall straight down
     view = _view(np.array([0.0, 10.0, 0.0]))
-    light_view_proj, matrix, texel, extent = fit_light(view, basis_sun, 50.0, 512, None)
-    from engine.render.shadows import Shadow, light_basis, light_boxes
+    from engine.render.shadows import Shadow, light_boxes
 
-    basis = np.array(light_basis(basis_sun))
+    basis = light_basis(basis_sun)
+    light_view_proj, matrix, texel, extent = fit_light(view, basis, 50.0, 512, None)
     caster = np.array([[[-0.5, 2.0, -0.5], [0.5, 3.0, 0.5]]])
     shadow = Shadow(None, matrix, light_view_proj, texel, 0.0, 50.0, 512, False, (), basis,
                     light_boxes(basis, caster), extent)
@@ -187,8 +187,9 @@ def test_the_light_box_keeps_its_size_as_the_camera_turns_and_moves_in_whole_tex
     turned = [_view(np.array([5.0, 3.0, 2.0]), (np.cos(a), -0.3, np.sin(a))) for a in np.linspace(0.0, 3.0, 7)]
     radii = [frustum_sphere(v, 40.0)[1] for v in turned]
     assert max(radii) - min(radii) < 1e-9
-    a = fit_light(_view(np.array([5.0, 3.0, 2.0]), (1.0, -0.3, 0.0)), sun, 40.0, 1024, None)
-    b = fit_light(_view(np.array([5.013, 3.0, 2.0]), (1.0, -0.3, 0.0)), sun, 40.0, 1024, None)
+    basis = light_basis(sun)
+    a = fit_light(_view(np.array([5.0, 3.0, 2.0]), (1.0, -0.3, 0.0)), basis, 40.0, 1024, None)
+    b = fit_light(_view(np.array([5.013, 3.0, 2.0]), (1.0, -0.3, 0.0)), basis, 40.0, 1024, None)
     texel = a[2]
     assert 0.013 < texel  # the camera moved less than a texel, so the box across the light moved 0 or 1 texel
     shift = (b[3] - a[3]) / texel
