@@ -101,6 +101,12 @@ class RenderSettings(ConfigModel):
                                description="Receivers look up the map this many shadow-map texels along their "
                                            "normal (normal-offset bias): raise it against shadow acne (stripes), "
                                            "lower it when shadows detach from their casters (peter-panning).")
+    terrain_shadows: bool = Field(True, description="The terrain's own shadows: each height field shades itself "
+                                                    "and the first terrain shades the meshes and the grass where "
+                                                    "its hills hide the sun, at any distance (a shadow-height map "
+                                                    "re-made when the sun or the terrain changes; a texture fetch "
+                                                    "per pixel on meshes, nothing per frame on the terrain and "
+                                                    "the grass).")
     sky_top: Color3 = Field((0.25, 0.45, 0.85), description="Sky colour at the zenith (linear RGB).")
     sky_horizon: Color3 = Field((0.75, 0.85, 0.95), description="Sky colour at the horizon (linear RGB).")
     sun_direction: Vec3 = Field((0.4, 0.8, 0.3), description="Direction towards the sun (any length but zero).")

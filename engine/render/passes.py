@@ -19,6 +19,7 @@ from engine.render.components import Hud, MeshConfig
 from engine.render.feature import OPAQUE, OVERLAY, SKY, ColorLayer, RenderFeature, View, write_view_color
 from engine.render.shadows import ShadowCasters, may_be_shadowed, read_shadow, receiver_uniforms
 from engine.render.terrain import TerrainChunks, build_terrain_chunks, draw_ranges, select_levels, shade_texels
+from engine.render.terrain_shadow import TerrainShadow, visibility
 from engine.spatial import Transform, cross, model_matrices
 
 if TYPE_CHECKING:
@@ -184,8 +185,9 @@ class _TerrainMesh:
     vbo: moderngl.Buffer
     ibo: moderngl.Buffer
     shade: moderngl.Texture  # rgba8, one texel per grid point: sqrt(baked diffuse + ambient light × albedo / scale)
-    shade_key: tuple = ()  # the light, colours and model rotation it was baked with
+    shade_key: tuple = ()  # the light, colours, model rotation and terrain shadow it was baked with
     shade_scale: float = 1.0
+    self_shadowed: bool = False  # some of its grid points are in its own shadow (the TERRAIN_SHADOW variant)
     detail: moderngl.Texture | None = None  # the ground texture (rgba8, sqrt of mix(1, colour, strength)), tiled
     detail_key: tuple = ()  # the texture array and strength it was made from
 
@@ -210,6 +212,8 @@ class TerrainFeature(RenderFeature):
         self.last_chunks: dict[str, int] = {}  # chunks drawn (not culled) last frame
         self.last_shadowed: dict[str, int] = {}  # of which drawn with the shadow look-up (receiver culling)
         self.bakes = 0  # shade textures baked (tests)
+        self._shadows: dict[int, TerrainShadow] = {}  # per terrain: its shadow-height map (terrain_shadow.py)
+        self.shadow_builds = 0  # shadow-height maps made (tests)
         # full-detail chunks take the baked light per vertex (Gouraud) instead of a texture fetch per pixel: on
         # llvmpipe that fetch was ≈ 1/3 of the terrain pass (off: every chunk fetches per pixel; A/B, tests)
         self.vertex_shade = True
@@ -223,12 +227,37 @@ class TerrainFeature(RenderFeature):
         drawn = {item[0] for item in out}
         for entity in [e for e in self._meshes if e not in drawn]:  # terrains gone
             self._meshes.pop(entity).release()
+        self._update_shadows(out)
         return out
+
+    def _update_shadows(self, terrains: list) -> None:
+        """Each terrain's shadow-height map for the current sun (re-made when the sun, the field or its placement
+        changed; none while ``[render] terrain_shadows`` is off), and the renderer's ``terrain_shadow``: the first
+        terrain's (lowest entity id), which the meshes and the grass receive; None when it casts no shadow above
+        the ground (a high sun over gentle hills: the receivers then skip the look-up)."""
+        r = self.renderer
+        enabled = r.settings.terrain_shadows
+        keep = {}
+        for entity, key, terrain, model in terrains if enabled else ():
+            field = terrain.field
+            shadow_key = (key, field.origin.tobytes(), model.tobytes(), tuple(np.round(r.sun_direction, 6)))
+            shadow = self._shadows.pop(entity, None)
+            if shadow is None or shadow.key != shadow_key:
+                if shadow is not None:
+                    shadow.release()
+                shadow = TerrainShadow.build(shadow_key, field, model, r.sun_direction)
+                self.shadow_builds += 1
+            keep[entity] = shadow
+        for shadow in self._shadows.values():  # terrains gone, or switched off
+            shadow.release()
+        self._shadows = keep
+        first = keep[min(keep)] if keep else None
+        r.terrain_shadow = first if first is not None and first.casts else None
 
     def static_key(self, view: View, data) -> Any:
         """The terrains drawn (height field, model matrix, colours, level-of-detail bound, ground texture): the
         level selection and the baked light follow from them, the view and the light; and the view's shadow map."""
-        return (self.vertex_shade, shadow_key(view)) + tuple(
+        return (self.vertex_shade, shadow_key(view), self.renderer.settings.terrain_shadows) + tuple(
             (entity, key, model.tobytes(), terrain.config.lod_pixels, tuple(map(tuple, terrain.config.colors)),
              _detail_key(terrain))
             for entity, key, terrain, model in data)
@@ -248,21 +277,28 @@ class TerrainFeature(RenderFeature):
         self._meshes[entity] = mesh
         return mesh
 
-    def _bake(self, mesh: _TerrainMesh, terrain: Terrain, model: np.ndarray) -> None:
-        """(Re-)bake the mesh's shade texture when the light, the colours or the model's rotation changed."""
+    def _bake(self, mesh: _TerrainMesh, entity: int, terrain: Terrain, model: np.ndarray) -> None:
+        """(Re-)bake the mesh's shade texture when the light, the colours, the model's rotation or the terrain's
+        own shadow changed."""
         r, s = self.renderer, self.renderer.settings
         light = (tuple(np.round(r.sun_direction, 6)), tuple(r.sun_color), r.ambient, tuple(s.sky_top),
                  tuple(s.sky_horizon))
-        key = (light, tuple(map(tuple, terrain.config.colors)), tuple(np.round(model[:3, :3], 6).ravel()))
+        shadow = self._shadows.get(entity)
+        key = (light, tuple(map(tuple, terrain.config.colors)), tuple(np.round(model[:3, :3], 6).ravel()),
+               None if shadow is None else shadow.key)
         if key == mesh.shade_key:
             return
+        sun = None if shadow is None else visibility(terrain.field.heights, shadow.heights, shadow.penumbra)
         texels = shade_texels(terrain.field, model, terrain.config.colors, r.sun_direction, r.sun_color, r.ambient,
-                              s.sky_top, s.sky_horizon)
+                              s.sky_top, s.sky_horizon, sun)
         # 8 bits a channel (a software rasteriser filters them on its fast integer path, ~2x cheaper than half
-        # floats), square-root encoded so that dark ground keeps its precision; the shader squares and scales
+        # floats), square-root encoded so that dark ground keeps its precision; the shader squares and scales.
+        # Alpha: the sun's share past the terrain's hills, linear
         mesh.shade_scale = max(float(texels[..., :3].max()), 1e-6)
         encoded = np.sqrt(np.clip(texels / mesh.shade_scale, 0.0, 1.0))
+        encoded[..., 3] = np.clip(texels[..., 3], 0.0, 1.0)
         mesh.shade.write(np.round(encoded * 255.0).astype(np.uint8).tobytes())
+        mesh.self_shadowed = sun is not None and bool((sun < 1.0).any())
         mesh.shade_key = key
         self.bakes += 1
 
@@ -311,7 +347,7 @@ class TerrainFeature(RenderFeature):
             draws = triangles = self.last_shadowed[view.name] = self.last_chunks[view.name] = 0
             for entity, key, terrain, model in data:
                 mesh = self._mesh(entity, key, terrain)
-                self._bake(mesh, terrain, model)
+                self._bake(mesh, entity, terrain, model)
                 textured = terrain.texture is not None
                 detail = {}
                 if textured:
@@ -329,6 +365,8 @@ class TerrainFeature(RenderFeature):
                 for in_shadow in (False, True):
                     part = np.where(receives == in_shadow, levels, -1)
                     shadows, uniforms = (shadow_defines, shadow_uniforms) if in_shadow else ((), {})
+                    if mesh.self_shadowed:
+                        shadows = shadows + ("TERRAIN_SHADOW",)
                     for ranges, vertex_shade in self._batches(mesh, part):
                         prog = self._program(vertex_shade, textured, shadows)
                         set_uniforms(prog, **lighting, **detail, **uniforms, model=model.T.copy(), shade_map=0,
@@ -364,6 +402,10 @@ class TerrainFeature(RenderFeature):
         for mesh in self._meshes.values():
             mesh.release()
         self._meshes.clear()
+        for shadow in self._shadows.values():
+            shadow.release()
+        self._shadows.clear()
+        self.renderer.terrain_shadow = None
 
 
 def chunk_boxes(chunks: TerrainChunks, model: np.ndarray) -> np.ndarray:
@@ -482,8 +524,9 @@ class MeshFeature(RenderFeature):
     def static_key(self, view: View, data) -> Any:
         """Every instance's matrix, colour and emission, and the view's shadow map: unchanged while nothing
         moves."""
-        return (shadow_key(view),) + tuple((shape, inst.tobytes(), casters)
-                                           for shape, (inst, casters) in sorted(data.items()))
+        terrain = self.renderer.terrain_shadow
+        return (shadow_key(view), None if terrain is None else terrain.key) + tuple(
+            (shape, inst.tobytes(), casters) for shape, (inst, casters) in sorted(data.items()))
 
     def shadow_casters(self, data) -> ShadowCasters | None:
         casting = {shape: inst[:casters] for shape, (inst, casters) in data.items() if casters}
@@ -568,6 +611,10 @@ class MeshFeature(RenderFeature):
             lighting = lighting_uniforms(self.renderer, view)
             shadow_defines, shadow_uniforms = receiver_uniforms(shadow, pc)
             defines = (("FOG",) if lighting["fog_density"] > 0.0 else ()) + shadow_defines
+            terrain = self.renderer.terrain_shadow
+            if terrain is not None:
+                defines += ("TERRAIN_SHADOW",)
+                shadow_uniforms = {**shadow_uniforms, **terrain.uniforms(self.ctx)}
             set_uniforms(self.renderer.load_program(SHADERS, "mesh", defines), **lighting, **shadow_uniforms)
             for shape, (inst, _) in data.items():
                 vao = self._vao(shape, len(inst), defines)

@@ -241,6 +241,9 @@ class Renderer:
         self.static_layer_counts = {"drawn": 0, "stored": 0, "restored": 0}  # views per outcome (tests, profiling)
         # camera entity -> its view's sun shadow map (depth texture, compared when sampled) and what it holds
         self._shadow_maps: dict[int, _ShadowMap] = {}
+        # the first terrain's shadow-height map (engine/render/terrain_shadow.py), set by the terrain feature's
+        # extract each frame: the meshes and the grass receive it; None without terrain or with terrain_shadows off
+        self.terrain_shadow = None
         self.shadow_draws = 0  # shadow maps drawn (tests: a still scene draws its map once)
         self.fold_color_layers = True  # a view's last colour layer is added in its tone map (_fold_layer)
         self._shader_generation = 0  # bumped by reload_shaders: kept pictures drawn with older shaders are stale

@@ -153,9 +153,11 @@ def _smoothstep(e0: float, e1: float, x: np.ndarray) -> np.ndarray:
 
 
 def shade_texels(field, model: np.ndarray, colors, sun_dir, sun_color, ambient: float, sky_top,
-                 sky_horizon) -> np.ndarray:
+                 sky_horizon, sun_visibility: np.ndarray | None = None) -> np.ndarray:
     """(rows, cols, 4) float32: the diffuse and ambient light of every grid point times its albedo, as
-    ``lit.glsl``'s ``shade`` computes them (the specular term, view-dependent and small, stays per vertex).
+    ``lit.glsl``'s ``shade`` computes them (the specular term, view-dependent and small, stays per vertex);
+    alpha: ``sun_visibility``, the share of the sun reaching each point past the terrain's own hills
+    (engine/render/terrain_shadow.py; None: 1 everywhere), which also scales the sun's diffuse term.
 
     Albedo: the ``colors`` ramp by the point's height normalised over the field, darkened by 30 % towards rock
     on slopes (normal·up from 0.85 down to 0.55).  Light: Lambert from the sun plus the hemisphere ambient
@@ -176,9 +178,13 @@ def shade_texels(field, model: np.ndarray, colors, sun_dir, sun_color, ambient: 
     ndl = np.maximum(n @ np.asarray(sun_dir, np.float64), 0.0)
     top, horizon = np.asarray(sky_top, np.float64), 0.35 * np.asarray(sky_horizon, np.float64)
     hemi = (horizon + (top - horizon) * (0.5 * n[..., 1:2] + 0.5)) * float(ambient)
+    if sun_visibility is not None:
+        ndl = ndl * sun_visibility
     lit = albedo * (np.asarray(sun_color, np.float64) * ndl[..., None] + hemi)
     out = np.ones(h.shape + (4,), np.float32)
     out[..., :3] = lit
+    if sun_visibility is not None:
+        out[..., 3] = sun_visibility
     return out
 
 

@@ -82,15 +82,17 @@ def _data_texture(ctx: moderngl.Context, texels: np.ndarray) -> moderngl.Texture
 RECORD_BYTES = 32  # a plant record: the per-instance attributes i_p0, i_p1 of shaders/plant.vert
 
 
-def plant_records(position: np.ndarray, yaw: np.ndarray, scale: np.ndarray, variant: np.ndarray,
-                  tint: np.ndarray) -> np.ndarray:
-    """(N, 8) float32: per plant (x, y, z, scale, cos yaw, sin yaw, tint, variant), the instance attributes of
-    ``shaders/plant.vert``.  The rotation's cosine and sine are taken once per plant here (in float64), not per
-    vertex in the shader."""
+def plant_records(position: np.ndarray, yaw: np.ndarray, scale: np.ndarray, tint: np.ndarray,
+                  sun: np.ndarray | float = 1.0) -> np.ndarray:
+    """(N, 8) float32: per plant (x, y, z, scale, cos yaw, sin yaw, tint, sun), the instance attributes of
+    ``shaders/plant.vert``; ``sun`` the share of the sun the terrain leaves the plant (its own shadow,
+    engine/render/terrain_shadow.py).  The rotation's cosine and sine are taken once per plant here (in float64),
+    not per vertex in the shader.  The plant's variant travels beside the records (it picks the indirect
+    command, not a vertex attribute)."""
     yaw = np.asarray(yaw, dtype=np.float64)
     out = np.zeros((len(position), 8), dtype=np.float32)
     out[:, :3], out[:, 3] = position, scale
-    out[:, 4], out[:, 5], out[:, 6], out[:, 7] = np.cos(yaw), np.sin(yaw), tint, variant
+    out[:, 4], out[:, 5], out[:, 6], out[:, 7] = np.cos(yaw), np.sin(yaw), tint, sun
     return out
 
 
@@ -129,12 +131,16 @@ class FieldGpu:
         self._programs: dict[tuple[str, bool, bool, bool], moderngl.Program] = {}
         self._vaos: dict[tuple, moderngl.VertexArray] = {}
         self.plant_prog = self._program("plant")
-        self.band_bake_prog = self._program("impostor", band_distance=True)
         self.band_prog = self._program("band")
         placed = data.placed
         ctx = self.ctx
         self.plant_records = plant_records(placed.plant_position, placed.plant_yaw, placed.plant_scale,
-                                           placed.plant_variant, placed.plant_tint)
+                                           placed.plant_tint)
+        self.plant_variant = np.asarray(placed.plant_variant, np.int64)
+        # what the lighting of the cached images (levels 4 and 5) and the plants' terrain shadow were made for:
+        # a hot reload of the sun or the sky re-bakes the images; a new terrain shadow re-takes the plants' share
+        self._light_key: tuple | None = None
+        self._terrain_key: Any = None
         self.cell_capacity = max(1, placed.cell_count)
         # the records of the plants drawn this frame, all geometric levels one after the other, each level's by
         # variant (the plan's plant list gathered on the CPU: 32 bytes a plant drawn, rewritten per frame)
@@ -187,15 +193,17 @@ class FieldGpu:
 
     # ------------------------------------------------------------------------------ programs, arrays
     def _program(self, name: str, *, debug: bool = False, fog: bool = False,
-                 band_distance: bool = False) -> moderngl.Program:
+                 band_distance: bool = False, terrain_shadow: bool = False) -> moderngl.Program:
         """``name.vert`` + ``name.frag`` compiled with the defines DEBUG_LEVELS (the debug view), FOG (the view
         has fog), BAND_DISTANCE (the band's capture: the level-4 rectangles also write their distance from the
-        eye) and, for the level-4 rectangles, BLEND_VIEWS (``blend_views``); shared through the renderer."""
-        key = (name, debug, fog, band_distance)
+        eye), TERRAIN_SHADOW (the level-4 rectangles read the terrain's shadow) and, for the level-4 rectangles,
+        BLEND_VIEWS (``blend_views``); shared through the renderer."""
+        key = (name, debug, fog, band_distance, terrain_shadow)
         prog = self._programs.get(key)
         if prog is not None:
             return prog
         defines = tuple(d for d, on in (("DEBUG_LEVELS", debug), ("FOG", fog), ("BAND_DISTANCE", band_distance),
+                                        ("TERRAIN_SHADOW", terrain_shadow),
                                         ("BLEND_VIEWS", name == "impostor" and self.cfg.blend_views)) if on)
         try:
             prog = self.renderer.program(_with_defines(shader_source(SHADERS / f"{name}.vert"), defines),
@@ -246,14 +254,15 @@ class FieldGpu:
         return dict(stem_color=tuple(cfg.stem_color), leaf_base_color=tuple(cfg.leaf_base_color),
                     leaf_tip_color=tuple(cfg.leaf_tip_color))
 
-    def _upload_plants(self, buffer: moderngl.Buffer, records: np.ndarray, listed: np.ndarray,
-                       counts: list[int]) -> np.ndarray:
+    def _upload_plants(self, buffer: moderngl.Buffer, records: np.ndarray, variants_of: np.ndarray,
+                       listed: np.ndarray, counts: list[int]) -> np.ndarray:
         """Write the records of the plants ``listed`` (the levels' plants one after the other, ``counts`` per
-        level) into ``buffer`` grouped by variant within each level (stable: a level's near-first order holds
-        within each variant), and return the indirect commands (levels × draw groups × variants,
-        :data:`COMMAND_WORDS`): the meshes' part made once, the instance counts and base instances per call."""
+        level; ``variants_of`` every record's plant variant) into ``buffer`` grouped by variant within each level
+        (stable: a level's near-first order holds within each variant), and return the indirect commands
+        (levels × draw groups × variants, :data:`COMMAND_WORDS`): the meshes' part made once, the instance counts
+        and base instances per call."""
         variants = self.cfg.plant_variants
-        variant = records[listed, 7].astype(np.int64)
+        variant = variants_of[listed]
         order, per_variant, offset = [], np.zeros((LEVELS, variants), np.int64), 0
         for level, n in enumerate(counts):
             v = variant[offset:offset + n]
@@ -353,7 +362,8 @@ class FieldGpu:
         offsets = state.layout_offset.reshape(-1, 2)
         local = np.column_stack([offsets[:, 0], np.zeros(len(offsets)), offsets[:, 1]])
         records = plant_records(local, state.layout_yaw.reshape(-1), state.layout_scale.reshape(-1),
-                                state.layout_variant.reshape(-1), state.layout_tint.reshape(-1))
+                                state.layout_tint.reshape(-1))  # lit by the whole sun: shade comes at draw time
+        variants_of = np.asarray(state.layout_variant, np.int64).reshape(-1)
         plants = ctx.buffer(reserve=max(1, n) * RECORD_BYTES)
         try:
             fbo.use()
@@ -364,7 +374,8 @@ class FieldGpu:
             set_uniforms(prog, **self._lighting(None), **self._plant_uniforms())
             progress = Progress("grass_field: baking the LOD cache", layouts * N_VIEWS)
             for k in range(layouts):
-                commands = self._upload_plants(plants, records, np.arange(k * n, (k + 1) * n), [0, 0, 0, n])
+                commands = self._upload_plants(plants, records, variants_of, np.arange(k * n, (k + 1) * n),
+                                               [0, 0, 0, n])
                 for v in range(N_VIEWS):
                     vp = self.layout.viewport(k * N_VIEWS + v)
                     fbo.viewport = vp
@@ -541,8 +552,9 @@ class FieldGpu:
         fbo.use()
         self.ctx.enable(moderngl.DEPTH_TEST)
         self.ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
-        prog = self.band_bake_prog
-        set_uniforms(prog, **self._lighting(None))
+        terrain = self.renderer.terrain_shadow
+        prog = self._program("impostor", band_distance=True, terrain_shadow=terrain is not None)
+        set_uniforms(prog, **self._lighting(None), **self._terrain_uniforms())
         vao = self._vao(prog, ("impostor",))
         self.atlas.use(0)
         self.bounds_tex.use(1)
@@ -588,8 +600,43 @@ class FieldGpu:
         return 6 * len(quads)
 
     # ---------------------------------------------------------------------------------------- drawing
+    def _terrain_uniforms(self) -> dict[str, Any]:
+        """terrain_shadow.glsl's uniforms and the level-4 images' shaded colour factor (impostor.frag), or
+        nothing without a terrain shadow."""
+        terrain = self.renderer.terrain_shadow
+        if terrain is None:
+            return {}
+        r = self.renderer
+        sky = np.asarray(r.settings.sky_top, np.float64) * r.ambient  # lit.glsl's hemisphere light, upwards
+        sun = np.asarray(r.sun_color, np.float64) * max(float(r.sun_direction[1]), 0.0)
+        shade = sky / np.maximum(sun + sky, 1e-6)
+        return {**terrain.uniforms(self.ctx), "terrain_shade": tuple(float(x) for x in shade)}
+
+    def sync_lighting(self) -> None:
+        """Follow the renderer's light and the terrain's shadow: a new sun or sky (a hot reload) re-bakes the
+        cached images (levels 4 and 5: the disk cache keys them by the light, so a return to an earlier light
+        loads them back); a new terrain shadow re-takes each plant's share of the sun (levels 0-3) and
+        re-captures the bands, whose images hold it."""
+        r = self.renderer
+        light = self._cache_extra()
+        light = (light["sun_dir"], light["sun_color"], light["ambient"], light["sky"])
+        if self._light_key is not None and light != self._light_key and self.atlas is not None:
+            for obj in (self.atlas, self.bounds_tex):
+                obj.release()
+            self.atlas = self.bounds_tex = None
+            self.band_entries.clear()
+        terrain = r.terrain_shadow
+        terrain_key = None if terrain is None else terrain.key
+        if terrain_key != self._terrain_key:
+            sun = 1.0 if terrain is None else terrain.visibility(self.data.placed.plant_position)
+            self.plant_records[:, 7] = sun
+            if self._light_key is not None:
+                self.band_entries.clear()
+        self._light_key, self._terrain_key = light, terrain_key
+
     def prepare(self, plan: FramePlan, camera: CameraInput, viewer=None) -> None:
         """Bake what this frame needs and is not cached yet (the LOD cache; the viewer cell's band)."""
+        self.sync_lighting()
         if len(plan.impostor_cells) or plan.band_cell is not None:
             self.ensure_impostors()
         if plan.band_cell is not None:
@@ -618,7 +665,8 @@ class FieldGpu:
         total = sum(counts)
         if total:
             listed = plan.plant_list if plan.plant_list is not None else np.concatenate(plan.plants)
-            commands = self._upload_plants(self.instance_buf, self.plant_records, listed, counts)
+            commands = self._upload_plants(self.instance_buf, self.plant_records, self.plant_variant, listed,
+                                           counts)
             prog = self._program("plant", debug=debug, fog=fog)
             set_uniforms(prog, **lighting, **self._plant_uniforms())
 
@@ -628,8 +676,10 @@ class FieldGpu:
             self._draw_plants(prog, self.instance_buf, commands, range(LEVELS), set_level if debug else None)
         # level 4 (the plan lists the rectangles nearest first)
         if rectangles:
-            prog = self._program("impostor", debug=debug, fog=fog)
-            set_uniforms(prog, **{**lighting, **self._impostor_uniforms(view.view_proj, view.camera_pos, view.ortho)})
+            terrain = self._terrain_uniforms()
+            prog = self._program("impostor", debug=debug, fog=fog, terrain_shadow=bool(terrain))
+            set_uniforms(prog, **{**lighting, **self._impostor_uniforms(view.view_proj, view.camera_pos, view.ortho),
+                                  **terrain})
             self.atlas.use(0)
             self.bounds_tex.use(1)
             self._vao(prog, ("impostor",)).render(moderngl.TRIANGLE_STRIP, vertices=4, instances=rectangles)

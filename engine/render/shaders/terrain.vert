@@ -14,6 +14,9 @@
 // SHADOWS: the shadow map's look-up point, and the sun's share of the light per colour channel,
 // sun·(n·l) / (sun·(n·l) + sky ambient): the albedo (and its slope darkening) multiplies both and cancels, so the
 // baked texel need not hold it apart.
+//
+// TERRAIN_SHADOW (the field shadows part of itself, engine/render/terrain_shadow.py): the baked light already
+// holds it; the texel's alpha, the sun's share past the hills, scales the per-vertex specular and the sun's part.
 #include "lit.glsl"
 #include "shadow.glsl"
 uniform mat4 view_proj;
@@ -28,8 +31,10 @@ in float in_skirt;  // > 0 on skirt vertices: lowered by this much (hides LOD cr
 uniform float detail_scale;  // 1 / texture_size: local metres -> repeats of the ground texture
 out vec2 v_detail_uv;
 #endif
+#if defined(VERTEX_SHADE) || defined(TERRAIN_SHADOW)
+uniform sampler2D shade_map;    // rgba8: rgb sqrt(light / shade_scale), a the sun's share past the terrain
+#endif
 #ifdef VERTEX_SHADE
-uniform sampler2D shade_map;    // rgba8: sqrt(light / shade_scale)
 #ifdef TEXTURED
 out vec3 v_lit;             // the lit, fogged albedo (times the ground texture per pixel, terrain.frag)
 out vec3 v_add;             // plus the fogged specular
@@ -52,23 +57,31 @@ out vec3 v_specular;
 void main() {
     vec4 world = model * vec4(in_position, 1.0);
     vec3 n = normalize(mat3(model) * in_normal);
+    vec2 uv = in_position.xz * uv_scale + uv_offset;
+#if defined(VERTEX_SHADE) || defined(TERRAIN_SHADOW)
+    ivec2 size = textureSize(shade_map, 0);
+    vec4 texel = texelFetch(shade_map, clamp(ivec2(floor(uv * vec2(size))), ivec2(0), size - 1), 0);
+#endif
+#ifdef TERRAIN_SHADOW
+    float ndl = max(dot(n, sun_dir), 0.0) * texel.a;
+#else
+    float ndl = max(dot(n, sun_dir), 0.0);
+#endif
     vec3 h = normalize(normalize(camera_pos - world.xyz) + sun_dir);
     float spec = max(dot(n, h), 0.0);
     spec *= spec; spec *= spec; spec *= spec; spec *= spec;  // ^16, lit.glsl's shininess for terrain
-    vec3 specular = sun_color * (spec * 0.03 * max(dot(n, sun_dir), 0.0));
+    vec3 specular = sun_color * (spec * 0.03 * ndl);
     float fog = clamp(1.0 - exp(-length(camera_pos - world.xyz) * fog_density), 0.0, 1.0);
     vec4 fogged = vec4(mix(specular, sky_horizon, fog), shade_scale * (1.0 - fog));
-    vec2 uv = in_position.xz * uv_scale + uv_offset;
 #ifdef SHADOWS
     v_shadow = shadow_coord(world.xyz, n);
-    vec3 sun = sun_color * max(dot(n, sun_dir), 0.0);
+    vec3 sun = sun_color * ndl;
     vec3 hemi = mix(sky_horizon * 0.35, sky_top, n.y * 0.5 + 0.5) * ambient;  // as terrain.py's shade_texels
     vec3 sun_part = sun / max(sun + hemi, vec3(1e-6));
     vec3 specular_fogged = specular * (1.0 - fog);
 #endif
 #ifdef VERTEX_SHADE
-    ivec2 size = textureSize(shade_map, 0);
-    vec3 light = texelFetch(shade_map, clamp(ivec2(floor(uv * vec2(size))), ivec2(0), size - 1), 0).rgb;
+    vec3 light = texel.rgb;
 #ifdef TEXTURED
     v_lit = light * light * fogged.a;
     v_add = fogged.rgb;

@@ -3,7 +3,9 @@
 #include "common.glsl"
 // Cached images are premultiplied (transparent background); alpha-tested with coverage-preserving mipmaps.
 // Variants (render.py): BLEND_VIEWS (cross-fade the two nearest views), DEBUG_LEVELS, FOG, BAND_DISTANCE (the
-// band's capture: each texel's distance from the capturing eye into a second target, for band.frag's fog).
+// band's capture: each texel's distance from the capturing eye into a second target, for band.frag's fog),
+// TERRAIN_SHADOW (the terrain hides the sun from part of the field: the image, lit by the whole sun, is scaled
+// towards its shaded colour; the band's capture keeps it, so the band needs nothing more).
 uniform sampler2D atlas_tex;
 in vec2 v_uv_a;
 in vec2 v_uv_b;
@@ -11,6 +13,12 @@ in float v_blend;
 in float v_fog;
 flat in int v_level;
 out vec4 frag;
+#ifdef TERRAIN_SHADOW
+in float v_sun;
+// the cached images hold level-3 grass (dots, lit with an upward normal and no specular: plant.vert), so the
+// shaded colour is the lit one times sky / (sun · sun_dir.y + sky) per channel (FieldGpu._terrain_uniforms)
+uniform vec3 terrain_shade;
+#endif
 #ifdef BAND_DISTANCE
 uniform vec3 eye;
 in vec3 v_world;
@@ -23,6 +31,9 @@ void main() {
 #endif
     if (c.a < 0.5) discard;
     vec3 col = c.rgb / c.a;
+#ifdef TERRAIN_SHADOW
+    col *= mix(terrain_shade, vec3(1.0), v_sun);
+#endif
 #ifdef DEBUG_LEVELS
     col = debug_tint(col, v_level);
 #endif

@@ -1,6 +1,7 @@
 #version 330
 #include "lit.glsl"
 #include "common.glsl"
+#include "terrain_shadow.glsl"
 // Level 4: one textured rectangle per cell, instanced. The rectangle faces azimuth i_face (turned by the 15°
 // rule on the CPU) and shows cached view i_tiles.x (i_tiles.y is cross-faded in with weight i_blend when the
 // blending option is on). It is drawn scaled about the eye so it sits in front of the cell's content while
@@ -26,6 +27,10 @@ flat out int v_level;
 #ifdef BAND_DISTANCE
 out vec3 v_world;       // the rectangle's point where the cell stands (before the scaling about the eye)
 #endif
+#ifdef TERRAIN_SHADOW
+out float v_sun;        // the share of the sun the terrain leaves on the ground there (per corner, interpolated;
+                        // the ground's, as the plants of levels 0-3 take it at their foot)
+#endif
 vec2 tile_uv(float tile, vec2 local) {
     int t = int(tile + 0.5);
     int cols = int(atlas.x + 0.5);
@@ -46,6 +51,9 @@ void main() {
     v_fog = clamp(1.0 - exp(-length(camera_pos - world) * fog_density), 0.0, 1.0);
 #ifdef BAND_DISTANCE
     v_world = world;
+#endif
+#ifdef TERRAIN_SHADOW
+    v_sun = terrain_sun_ground(world);
 #endif
     if (ortho == 0) {
         float d = length(i_centre - eye);

@@ -14,7 +14,7 @@ uniform mat4 view_proj;
 in vec4 in_a;  // the vertex: plant-local position, colour parameter (0 at the blade's root, 1 at the tip)
 in vec4 in_b;  // normal, kind (0 tube, 1 leaf, 2 line or dot)
 in vec4 i_p0;  // the plant: (x, y, z, scale)
-in vec4 i_p1;  // (cos yaw, sin yaw, tint, variant)
+in vec4 i_p1;  // (cos yaw, sin yaw, tint, the share of the sun the terrain's hills leave the plant)
 uniform vec3 stem_color;
 uniform vec3 leaf_base_color;
 uniform vec3 leaf_tip_color;
@@ -39,7 +39,7 @@ void main() {
     // lit.glsl's shade() with shininess 16 as four squarings; lines and dots have no specular term (strength 0)
     // and are drawn at 80 %
     float strength = dots ? 0.0 : (kind > 0.5 ? 0.05 : 0.02);
-    float ndl = max(dot(n, sun_dir), 0.0);
+    float ndl = max(dot(n, sun_dir), 0.0) * p1.w;
     vec3 hemi = mix(sky_horizon * 0.35, sky_top, n.y * 0.5 + 0.5) * ambient;
     vec3 h = normalize(normalize(to_eye) + sun_dir);
     float spec = max(dot(n, h), 0.0);

@@ -268,3 +268,100 @@ def test_a_field_despawned_and_spawned_again_leaves_no_per_view_state_behind(tmp
     finally:
         renderer.release()
         app.renderer = None
+
+
+def _walled(app: App, height: float) -> None:
+    """The ground made flat but for a wall ``height`` high along z over x in [80, 160] (257 x 257 points, 10 m
+    apart, centred on the origin)."""
+    from engine.builtin import Terrain, find_named
+    from engine.heightfield import HeightField
+
+    terrain = app.world.get(find_named(app.world, "ground"), Terrain)
+    h = np.zeros((257, 257))
+    h[:, 136:145] = height
+    terrain.field = HeightField(h, 10.0, terrain.field.origin)
+
+
+@pytest.mark.parametrize("far", [False, True])
+def test_the_terrains_shadow_falls_on_the_grass(tmp_path, far):
+    """Behind a wall, under a low sun from +x, the plants (levels 0-3) and the cached images (level 4) lose the
+    sun's light; beyond the shade's edge the picture keeps its bits."""
+    grass = SMALL.replace("plants_per_cell = 16", "plants_per_cell = 64") + "grid_x = 8\ngrid_z = 8\n"
+    camera = (_camera((-60.0, 900.0, 700.0), pitch=-52.0) if far else
+              _camera((-5.0, 45.0, -150.0), yaw=90.0, pitch=-25.0))
+    images = {}
+    for on, hide in ((True, False), (False, False), (False, True)):
+        cam = camera + ('hide_features = ["grass_field"]\n' if hide else "")
+        app = _app(tmp_path, grass, cam)
+        app.config.render.sun_direction = (1.0, 0.5, 0.0)  # tan(elevation) 0.5: a 100 m wall shades 200 m
+        app.config.render.terrain_shadows = on
+        app.config.render.shadows = False
+        app.config.render.fog_density = 0.0
+        _walled(app, 100.0)
+        renderer = make_renderer(app, 160, 120)
+        try:
+            app.step(1)
+            app.render_frame()
+            images[on, hide] = np.asarray(renderer.read_image()).astype(float)
+            view = renderer.views[0]
+            if hide:
+                continue
+            gpu = next(iter(_feature(app).fields.values()))
+            plan = next(iter(_feature(app).plans.values()))
+            assert len(plan.impostor_cells) > 10 if far else sum(len(p) for p in plan.plants) > 20
+            sun = gpu.plant_records[:, 7]
+            x = gpu.data.placed.plant_position[:, 0]
+            if on:  # the shade reaches from the wall's foot (x = 70) to x = -120, softened over a cell or two
+                assert (sun[(x > -100.0) & (x < 60.0)] == 0.0).all()
+                assert (sun[(x < -135.0) | (x > 175.0)] == 1.0).all()
+                assert (sun < 1.0).sum() > 0.15 * len(sun)
+            else:
+                assert (sun == 1.0).all()
+        finally:
+            renderer.release()
+            app.renderer = None
+    grass_pixels = np.abs(images[False, False] - images[False, True]).sum(axis=-1) > 20.0
+
+    def x_of_pixels() -> np.ndarray:
+        """The x where each pixel's ray meets the ground (y = 0)."""
+        inverse = np.linalg.inv(view.view_proj.astype(np.float64))
+        rows, cols = np.mgrid[0:view.height, 0:view.width]
+        ndc = np.stack([(cols + 0.5) / view.width * 2 - 1, 1 - (rows + 0.5) / view.height * 2,
+                        np.full(rows.shape, -1.0), np.ones(rows.shape)], axis=-1) @ inverse.T
+        far_points = np.stack([ndc[..., 0] * 0 + (cols + 0.5) / view.width * 2 - 1, 1 - (rows + 0.5) / view.height * 2,
+                               np.ones(rows.shape), np.ones(rows.shape)], axis=-1) @ inverse.T
+        near, far_ = ndc[..., :3] / ndc[..., 3:], far_points[..., :3] / far_points[..., 3:]
+        t = near[..., 1] / (near[..., 1] - far_[..., 1])
+        return near[..., 0] + t * (far_[..., 0] - near[..., 0])
+
+    x = x_of_pixels()
+    shaded = grass_pixels & (x > -90.0) & (x < 50.0)
+    lit = grass_pixels & (x < -300.0)  # a pixel shows grass up to 20 m tall in front of where its ray lands
+    assert shaded.sum() > 20 and lit.sum() > 20
+    on, off = images[True, False], images[False, False]
+    assert on[shaded].sum() < 0.8 * off[shaded].sum()
+    np.testing.assert_allclose(on[lit], off[lit], atol=2.0)
+    assert ((off - on).sum(axis=-1) < -3.0).sum() == 0  # nothing brighter
+
+
+def test_a_new_sun_bakes_the_lod_cache_again(tmp_path):
+    """A hot reload of the sun (or the sky) re-bakes the cached images, lit as the plants now are, and
+    re-captures the band."""
+    app = _app(tmp_path, SMALL + "grid_x = 16\ngrid_z = 16\n", _camera((0.0, 40.0, 700.0), pitch=-5.0))
+    renderer = make_renderer(app, 96, 72)
+    try:
+        app.step(1)
+        app.render_frame()
+        gpu = next(iter(_feature(app).fields.values()))
+        assert gpu.baked_views == 36
+        before = np.asarray(renderer.read_image()).astype(float)
+        app.render_frame()
+        assert gpu.baked_views == 36
+        renderer.use_settings(renderer.settings.model_copy(update={"sun_direction": (-0.6, 0.3, 0.2)}))
+        app.render_frame()
+        assert gpu.baked_views == 72
+        after = np.asarray(renderer.read_image()).astype(float)
+        assert np.abs(after - before).max() > 10.0
+    finally:
+        renderer.release()
+        app.renderer = None

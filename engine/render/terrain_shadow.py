@@ -1,0 +1,188 @@
+"""Shadows the terrain casts: a shadow-height map of the height field, for the sun's current direction.
+
+The sun's shadow maps (engine/render/shadows.py) cover each view's first ``shadow_distance`` metres and only the
+casters drawn into them; a valley wall throwing its shadow across the valley floor a kilometre away needs neither.
+A height field has a cheaper exact answer (the horizon-map idea of Max 1988 and of Stewart's horizon maps, kept
+to one direction): for every grid point p, the **shadow height**
+
+    S(p) = max( h(p), max over t > 0 of h(p + t·u) − t·tan θ )
+
+where u is the sun's horizontal direction and θ its elevation: a point straight above or below p is in the
+terrain's shadow exactly when its height is below S(p) (the ray from it towards the sun enters the ground).  It
+is found in one sweep over the grid from the sun's side, :func:`shadow_heights`, each column (or row, along the
+sun's dominant axis) from the one before it: S(p) = max(h(p), S(p + step) − |step|·tan θ), the previous
+column's S interpolated linearly at the step's fractional row.  Axis-aligned and diagonal suns are exact; others
+lose a little to the interpolation (a blur of a fraction of a cell across the sun's path).
+
+The map is re-made only when the sun, the height field or its placement changes.  Receivers read it with a
+bilinear fetch: a point at local height y over (x, z) gets the sun's light times
+``clip((y − S(x, z)) / penumbra + 1, 0, 1)`` (:func:`visibility`), ``penumbra`` the sun's drop over one grid
+step, so a shadow's edge is about one cell wide wherever it falls.  The terrain bakes this into its shade
+texture (engine/render/terrain.py's ``shade_texels``); meshes look it up per pixel and the grass per plant
+(``terrain_shadow.glsl``, :meth:`TerrainShadow.uniforms`, :meth:`TerrainShadow.visibility`).
+
+The first terrain (lowest entity id) casts on meshes and grass; every terrain shades itself with its own map.
+Points outside the field's footprint are lit (no terrain beside a field: it is finite, as its collider is), and
+with the sun at or below the terrain's horizon everything is in its shadow.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import moderngl
+import numpy as np
+
+__all__ = ["TERRAIN_SHADOW_UNIT", "TerrainShadow", "penumbra_height", "shadow_heights", "sun_in_local", "visibility"]
+
+TERRAIN_SHADOW_UNIT = 6  # the texture unit receivers bind the map to (the sun's shadow map takes 7, features 0-5)
+
+_BELOW = 1e30  # S where the sun is at or below the horizon: every point is under it
+
+
+def sun_in_local(model: np.ndarray, sun_dir: np.ndarray) -> np.ndarray:
+    """The world's direction towards the sun in a height field's local frame (unit): directions map by the inverse
+    of the model matrix's 3 × 3 part, so rotated, tilted or unevenly scaled fields see the sun where it is."""
+    local = np.linalg.solve(np.asarray(model, np.float64)[:3, :3], np.asarray(sun_dir, np.float64))
+    n = float(np.linalg.norm(local))
+    return local / n if n > 0.0 else np.array([0.0, 1.0, 0.0])
+
+
+def _tan_elevation(sun: np.ndarray) -> float:
+    return float(sun[1]) / max(float(np.hypot(sun[0], sun[2])), 1e-12)
+
+
+def penumbra_height(spacing: float, sun: np.ndarray) -> float:
+    """How far below its shadow height a point is fully shadowed (local units): the sun's drop over one grid step,
+    so the soft edge spans about one cell on the ground at any elevation."""
+    if sun[1] <= 0.0:
+        return float(spacing)
+    return float(spacing) * float(np.clip(_tan_elevation(sun), 1e-3, 1e3))
+
+
+def shadow_heights(heights: np.ndarray, spacing: float, sun: np.ndarray) -> np.ndarray:
+    """(rows, cols) float64: per grid point the height S below which a point there is hidden from the sun by the
+    field (``heights[row, col]`` at x = col·spacing, z = row·spacing; ``sun`` the unit direction towards the sun in
+    that frame).  S ≥ h everywhere, S = h where the ground itself is lit.  See the module docstring."""
+    h = np.asarray(heights, np.float64)
+    if sun[1] <= 0.0:
+        return np.full(h.shape, _BELOW)
+    horizontal = float(np.hypot(sun[0], sun[2]))
+    if horizontal < 1e-9 * max(float(sun[1]), 1e-30):  # straight overhead: nothing throws a shadow
+        return h.copy()
+    transposed = abs(sun[2]) > abs(sun[0])
+    if transposed:  # sweep along the dominant axis: rows of the transposed grid become its columns
+        h = h.T
+        along, across = float(sun[2]), float(sun[0])
+    else:
+        along, across = float(sun[0]), float(sun[2])
+    rows, cols = h.shape
+    slope = across / abs(along)  # rows moved per column stepped towards the sun, |slope| <= 1
+    drop = spacing * np.sqrt(1.0 + slope * slope) * _tan_elevation(sun)
+    shift = int(np.floor(slope))
+    t = slope - shift
+    floor = float(h.min()) - 1e9  # "no occluder": rows whose step leaves the grid
+    src = np.arange(rows) + shift
+    lo_ok = (src >= 0) & (src < rows)
+    hi_ok = (src + 1 >= 0) & (src + 1 < rows)
+    lo_idx, hi_idx = np.clip(src, 0, rows - 1), np.clip(src + 1, 0, rows - 1)
+    s = np.empty_like(h)
+    step = 1 if along > 0.0 else -1
+    order = range(cols - 1, -1, -1) if step > 0 else range(cols)
+    prev = None
+    for c in order:
+        if prev is None:
+            s[:, c] = h[:, c]
+        else:
+            lo = np.where(lo_ok, prev[lo_idx], floor)
+            hi = np.where(hi_ok, prev[hi_idx], floor) if t > 0.0 else lo
+            if t > 0.0:  # a fractional row: both neighbours must lie on the grid
+                reached = lo + (hi - lo) * t
+                reached[~(lo_ok & hi_ok)] = floor
+            else:
+                reached = lo
+            s[:, c] = np.maximum(h[:, c], reached - drop)
+        prev = s[:, c]
+    return s.T.copy() if transposed else s
+
+
+def visibility(y: np.ndarray, shadow_height: np.ndarray, penumbra: float) -> np.ndarray:
+    """How much of the sun reaches points at height ``y`` whose shadow height is ``shadow_height``: 1 above it,
+    falling to 0 over ``penumbra`` below it (terrain_shadow.glsl's ``terrain_sun``)."""
+    return np.clip((np.asarray(y, np.float64) - shadow_height) / penumbra + 1.0, 0.0, 1.0)
+
+
+@dataclass
+class TerrainShadow:
+    """One terrain's shadow-height map on the GPU and how receivers reach it (see the module docstring)."""
+
+    key: tuple  # what it was made from: the field, its model matrix, the sun
+    heights: np.ndarray  # (rows, cols) float64 shadow heights (local units)
+    ground: np.ndarray  # (rows, cols) float64 the sun's share on the ground itself (visibility at h)
+    spacing: float
+    origin: np.ndarray  # (x, z) of the grid's first point (local)
+    world_to_local: np.ndarray  # 4 × 4 (column-vector convention)
+    penumbra: float
+    below_horizon: bool  # the sun is at or below the field's horizon: everything is in shadow
+    casts: bool  # some shadow falls on or above the ground (else nothing above the ground is in its shadow)
+    texture: moderngl.Texture | None = None
+
+    @classmethod
+    def build(cls, key: tuple, field, model: np.ndarray, sun_dir: np.ndarray) -> TerrainShadow:
+        sun = sun_in_local(model, sun_dir)
+        heights = shadow_heights(field.heights, field.spacing, sun)
+        below = bool(sun[1] <= 0.0)
+        casts = below or bool((heights > field.heights).any())
+        penumbra = penumbra_height(field.spacing, sun)
+        return cls(key, heights, visibility(field.heights, heights, penumbra), float(field.spacing),
+                   np.asarray(field.origin, np.float64).copy(), np.linalg.inv(np.asarray(model, np.float64)),
+                   penumbra, below, casts)
+
+    @property
+    def uv_transform(self) -> tuple[float, float, float, float]:
+        """local (x, z) -> texture (u, v): scale x, scale z, offset u, offset v (texel centres on grid points)."""
+        rows, cols = self.heights.shape
+        sx, sz = 1.0 / (self.spacing * cols), 1.0 / (self.spacing * rows)
+        return sx, sz, 0.5 / cols - self.origin[0] * sx, 0.5 / rows - self.origin[1] * sz
+
+    def upload(self, ctx: moderngl.Context) -> moderngl.Texture:
+        """The map as an rg32f texture (made on first use: r the shadow heights, g the ground's share of the
+        sun), filtered bilinearly, clamped."""
+        if self.texture is None:
+            rows, cols = self.heights.shape
+            texels = np.stack([self.heights, self.ground], axis=-1).astype(np.float32)
+            self.texture = ctx.texture((cols, rows), 2, texels.tobytes(), dtype="f4")
+            self.texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
+            self.texture.repeat_x = self.texture.repeat_y = False
+        return self.texture
+
+    def release(self) -> None:
+        if self.texture is not None:
+            self.texture.release()
+            self.texture = None
+
+    def uniforms(self, ctx: moderngl.Context, unit: int = TERRAIN_SHADOW_UNIT) -> dict[str, Any]:
+        """Bind the map to texture ``unit`` and return the uniforms of terrain_shadow.glsl."""
+        self.upload(ctx).use(unit)
+        return dict(terrain_shadow=unit, terrain_shadow_matrix=self.world_to_local.T.astype(np.float32).copy(),
+                    terrain_shadow_uv=self.uv_transform,
+                    terrain_shadow_params=(1.0 / self.penumbra, 0.0 if self.below_horizon else 1.0))
+
+    def visibility(self, points: np.ndarray) -> np.ndarray:
+        """(n,) the sun's share reaching world ``points`` (n, 3), as the shader computes it (bilinear S)."""
+        p = np.asarray(points, np.float64).reshape(-1, 3)
+        local = p @ self.world_to_local[:3, :3].T + self.world_to_local[:3, 3]
+        rows, cols = self.heights.shape
+        gx = (local[:, 0] - self.origin[0]) / self.spacing
+        gz = (local[:, 2] - self.origin[1]) / self.spacing
+        outside = (gx < -0.5) | (gz < -0.5) | (gx > cols - 0.5) | (gz > rows - 0.5)
+        gx, gz = np.clip(gx, 0.0, cols - 1), np.clip(gz, 0.0, rows - 1)
+        c0 = np.minimum(gx.astype(np.int64), cols - 2)
+        r0 = np.minimum(gz.astype(np.int64), rows - 2)
+        tx, tz = gx - c0, gz - r0
+        s = self.heights
+        top = s[r0, c0] + tx * (s[r0, c0 + 1] - s[r0, c0])
+        bottom = s[r0 + 1, c0] + tx * (s[r0 + 1, c0 + 1] - s[r0 + 1, c0])
+        vis = visibility(local[:, 1], top + tz * (bottom - top), self.penumbra)
+        return np.where(outside, 0.0 if self.below_horizon else 1.0, vis)
