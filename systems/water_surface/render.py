@@ -80,10 +80,8 @@ class WaterFeature(RenderFeature):
         verts, idx = item["vertices"], item["indices"]
         if buf.vbo is None or buf.vbo.size < verts.nbytes or buf.ibo.size < idx.nbytes:
             buf.release()
-            prog = self.renderer.load_program(SHADERS, "water")
             buf.vbo = self.ctx.buffer(reserve=max(verts.nbytes * 2, 1024))
             buf.ibo = self.ctx.buffer(reserve=max(idx.nbytes * 2, 1024))
-            buf.vao = self.ctx.vertex_array(prog, [(buf.vbo, "3f 3f", "in_position", "in_normal")], buf.ibo, 4)
         buf.vbo.write(verts.tobytes())
         buf.ibo.write(idx.tobytes())
         wire = item["wire"]
@@ -113,11 +111,17 @@ class WaterFeature(RenderFeature):
             self.ctx.enable(moderngl.DEPTH_TEST | moderngl.BLEND)
             self.ctx.disable(moderngl.CULL_FACE)
             self.ctx.blend_func = moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA
-            water = self.renderer.load_program(SHADERS, "water")
+            terrain = self.renderer.terrain_shadow  # the hills' shadow (engine/render/terrain_shadow.py)
+            water = self.renderer.load_program(SHADERS, "water", ("TERRAIN_SHADOW",) if terrain is not None else ())
             lights = lighting_uniforms(self.renderer, view)
-            set_uniforms(water, **lights)
+            set_uniforms(water, **lights, **({} if terrain is None else terrain.uniforms(self.ctx)))
             for item in data:
                 buf = self._upload(item)
+                if buf.vao is None or buf.vao.program is not water:  # new buffers, another variant, or F5
+                    if buf.vao is not None:
+                        buf.vao.release()
+                    buf.vao = self.ctx.vertex_array(water, [(buf.vbo, "3f 3f", "in_position", "in_normal")],
+                                                    buf.ibo, 4)
                 set_uniforms(water, shallow_color=item["shallow"], deep_color=item["deep"], clarity=item["clarity"],
                              floor_y=item["floor"], rest_y=item["rest"])
                 buf.vao.render(moderngl.TRIANGLES, vertices=len(item["indices"]))

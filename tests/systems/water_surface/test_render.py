@@ -132,3 +132,39 @@ def test_a_water_surface_despawned_and_spawned_again_leaves_no_gl_objects_behind
     case = dict(CASES["paper_pool"], bodies="", steps=1)
     counts = gl_objects_per_respawn(_app(tmp_path, case), "water", live)
     assert counts[1:] == counts[:1] * (len(counts) - 1)
+
+
+@pytest.mark.parametrize("wall", [True, False])
+def test_the_terrains_shadow_takes_the_suns_light_off_the_water(tmp_path, wall):
+    """A wall of terrain east of the pond, under a low sun from the east: its shadow covers the water, which loses
+    the sun's light on its body and its glint (the sky's reflection stays). Flat ground casts nothing: same bits."""
+    from engine.builtin import Terrain, find_named
+    from engine.heightfield import HeightField
+
+    case = dict(CASES["calm_pond"], bodies="""
+[[entities]]
+name = "ground"
+[entities.components.Transform]
+position = [0.0, -2.0, 0.0]
+[entities.components.Terrain]
+size_exponent = 5
+spacing = 1.0
+amplitude = 0.0
+""")
+    images = []
+    for on in (True, False):
+        app = _app(tmp_path, case)
+        app.config.render.sun_direction = (1.0, 0.5, 0.0)
+        app.config.render.terrain_shadows = on
+        h = np.zeros((33, 33))
+        if wall:  # x in [7, 9] (the grid is centred), 8 m high: the water (y = 0) is shaded for x in [-5, 6]
+            h[:, 23:26] = 8.0
+        terrain = app.world.get(find_named(app.world, "ground"), Terrain)
+        terrain.field = HeightField(h, 1.0, terrain.field.origin)
+        images.append(np.asarray(render_app(app, width=160, height=120), np.float64))
+    on, off = images
+    water = (slice(70, None), slice(None))
+    if wall:
+        assert on[water].mean() < 0.85 * off[water].mean()
+    else:
+        np.testing.assert_array_equal(on, off)
