@@ -32,6 +32,7 @@ from components.grass_field import GrassFieldConfig, GrassFieldState
 from engine.render.feature import OPAQUE, RenderFeature, View
 from engine.render.passes import lighting_uniforms, opaque_setup, set_uniforms
 from engine.render.renderer import shader_source
+from engine.render.shadows import may_be_shadowed, read_shadow, receiver_uniforms
 from engine.spatial import Transform
 from systems.grass_field.frame import FramePlan, band_apothem, band_sector_content, plan_frame
 from systems.grass_field.geometry import DRAW_GROUPS, LEVELS, CompactMesh, compact_mesh
@@ -157,7 +158,7 @@ class FieldGpu:
                 self.mesh_commands[level, g, :, 0] = mesh.count[group]
                 self.mesh_commands[level, g, :, 2] = mesh.first[group]
                 self.mesh_commands[level, g, :, 3] = mesh.vertex_base
-        self.command_buf = ctx.buffer(reserve=self.mesh_commands.nbytes)
+        self.command_buf = ctx.buffer(reserve=2 * self.mesh_commands.nbytes)  # two sets: plain, shadowed
         # multi-draw indirect with base instances (GL 4.3); before it, one draw per variant (rebinding offsets)
         self.multi_draw = self.ctx.version_code >= 430
         # level 4: the LOD cache
@@ -189,22 +190,26 @@ class FieldGpu:
         self.band_buf = ctx.buffer(reserve=N_BAND_SIDES * 6 * 5 * 4)
         self._band_content: dict[tuple[int, float], np.ndarray] = {}
         self.draw_calls = 0  # draw calls of the last draw() (bakes excluded)
+        self.shadowed_plants = 0  # plants of the last draw() drawn with the sun shadow look-up
         self._released = False
 
     # ------------------------------------------------------------------------------ programs, arrays
     def _program(self, name: str, *, debug: bool = False, fog: bool = False,
-                 band_distance: bool = False, terrain_shadow: bool = False) -> moderngl.Program:
+                 band_distance: bool = False, terrain_shadow: bool = False,
+                 shadows: tuple[str, ...] = ()) -> moderngl.Program:
         """``name.vert`` + ``name.frag`` compiled with the defines DEBUG_LEVELS (the debug view), FOG (the view
         has fog), BAND_DISTANCE (the band's capture: the level-4 rectangles also write their distance from the
-        eye), TERRAIN_SHADOW (the level-4 rectangles read the terrain's shadow) and, for the level-4 rectangles,
-        BLEND_VIEWS (``blend_views``); shared through the renderer."""
-        key = (name, debug, fog, band_distance, terrain_shadow)
+        eye), TERRAIN_SHADOW (the level-4 rectangles read the terrain's shadow), ``shadows`` (the plants read the
+        sun's shadow map: engine/render/shadows.py's defines) and, for the level-4 rectangles, BLEND_VIEWS
+        (``blend_views``); shared through the renderer."""
+        key = (name, debug, fog, band_distance, terrain_shadow, shadows)
         prog = self._programs.get(key)
         if prog is not None:
             return prog
         defines = tuple(d for d, on in (("DEBUG_LEVELS", debug), ("FOG", fog), ("BAND_DISTANCE", band_distance),
                                         ("TERRAIN_SHADOW", terrain_shadow),
                                         ("BLEND_VIEWS", name == "impostor" and self.cfg.blend_views)) if on)
+        defines += shadows
         try:
             prog = self.renderer.program(_with_defines(shader_source(SHADERS / f"{name}.vert"), defines),
                                          _with_defines(shader_source(SHADERS / f"{name}.frag"), defines))
@@ -255,32 +260,60 @@ class FieldGpu:
                     leaf_tip_color=tuple(cfg.leaf_tip_color))
 
     def _upload_plants(self, buffer: moderngl.Buffer, records: np.ndarray, variants_of: np.ndarray,
-                       listed: np.ndarray, counts: list[int]) -> np.ndarray:
+                       listed: np.ndarray, counts: list[int], receives: np.ndarray | None = None) -> np.ndarray:
         """Write the records of the plants ``listed`` (the levels' plants one after the other, ``counts`` per
         level; ``variants_of`` every record's plant variant) into ``buffer`` grouped by variant within each level
         (stable: a level's near-first order holds within each variant), and return the indirect commands
         (levels × draw groups × variants, :data:`COMMAND_WORDS`): the meshes' part made once, the instance counts
-        and base instances per call."""
+        and base instances per call.  With ``receives`` (a bool per listed plant: a sun shadow may reach it)
+        the plants are split into two sets, and the commands are (2, levels, draw groups, variants, words):
+        set 0 the plants drawn plainly, set 1 those drawn with the shadow look-up."""
         variants = self.cfg.plant_variants
-        variant = variants_of[listed]
-        order, per_variant, offset = [], np.zeros((LEVELS, variants), np.int64), 0
+        sets = 1 if receives is None else 2
+        key = variants_of[listed] if receives is None else variants_of[listed] + variants * receives
+        order, per_key, offset = [], np.zeros((LEVELS, sets * variants), np.int64), 0
         for level, n in enumerate(counts):
-            v = variant[offset:offset + n]
-            order.append(offset + np.argsort(v, kind="stable"))
-            per_variant[level] = np.bincount(v, minlength=variants)
+            k = key[offset:offset + n]
+            order.append(offset + np.argsort(k, kind="stable"))
+            per_key[level] = np.bincount(k, minlength=sets * variants)
             offset += n
         buffer.write(records[listed[np.concatenate(order)]])
-        commands = self.mesh_commands.copy()
-        commands[..., 1] = per_variant[:, None, :]
-        commands[..., 4] = (np.cumsum(per_variant.ravel()) - per_variant.ravel()).reshape(LEVELS, 1, variants)
-        return commands
+        base = (np.cumsum(per_key.ravel()) - per_key.ravel()).reshape(LEVELS, sets, variants).transpose(1, 0, 2)
+        commands = np.repeat(self.mesh_commands[None], sets, axis=0)
+        commands[..., 1] = per_key.reshape(LEVELS, sets, variants).transpose(1, 0, 2)[:, :, None, :]
+        commands[..., 4] = base[:, :, None, :]
+        return commands if receives is not None else commands[0]
+
+    def _receivers(self, shadow, listed: np.ndarray) -> np.ndarray | None:
+        """Which listed plants a sun shadow of this frame may reach (None without a shadow map): per cell, by
+        its box (the cell's plants with their reach and height) against the casters' (receiver culling)."""
+        if shadow is None or not len(listed):
+            return None
+        placed, data = self.data.placed, self.data
+        cells = np.unique(listed // placed.plants_per_cell)
+        centre = placed.cell_centre[cells]
+        lo = np.column_stack([centre[:, 0] - data.cell_radius, placed.cell_ground[cells, 0],
+                              centre[:, 2] - data.cell_radius])
+        hi = np.column_stack([centre[:, 0] + data.cell_radius, placed.cell_ground[cells, 1] + data.plant_height,
+                              centre[:, 2] + data.cell_radius])
+        reached = np.zeros(placed.cell_count, bool)
+        reached[cells] = may_be_shadowed(shadow, np.stack([lo, hi], axis=1))
+        return reached[listed // placed.plants_per_cell] if reached.any() else None
 
     def _draw_plants(self, prog: moderngl.Program, records: moderngl.Buffer, commands: np.ndarray,
-                     levels: range | list[int], set_level=None) -> None:
+                     levels: range | list[int], set_level=None, command_set: int | None = None) -> None:
         """Draw the plants of ``levels`` uploaded by :meth:`_upload_plants`: per level and draw group one
-        multi-draw indirect call (one command per variant), or one draw per variant before GL 4.3."""
-        if self.multi_draw:
-            self.command_buf.write(commands.tobytes())
+        multi-draw indirect call (one command per variant), or one draw per variant before GL 4.3.
+        ``command_set``: which set of a split upload to draw (the caller wrote all of ``commands`` into the
+        command buffer once: rewriting it between the sets' draws would wait for the first set's); None: one
+        set, written here."""
+        first_command = 0
+        if command_set is None:
+            if self.multi_draw:
+                self.command_buf.write(commands.tobytes())
+        else:
+            first_command = command_set * int(np.prod(commands.shape[1:4]))
+            commands = commands[command_set]
         ctx = self.ctx
         variants = commands.shape[2]
         for level in levels:
@@ -298,7 +331,7 @@ class FieldGpu:
                     ctx.enable(moderngl.CULL_FACE)
                 if self.multi_draw:
                     vao.render_indirect(self.command_buf, mode, count=variants,
-                                        first=(level * len(DRAW_GROUPS) + g) * variants)
+                                        first=first_command + (level * len(DRAW_GROUPS) + g) * variants)
                     self.draw_calls += 1
                 else:
                     for count, instances, first, base_vertex, base_instance in commands[level, g].tolist():
@@ -643,8 +676,10 @@ class FieldGpu:
             self.ensure_band(plan.band_cell, camera, viewer=viewer, apothem=plan.band_apothem)
 
     def draw(self, fbo: moderngl.Framebuffer, plan: FramePlan, view: View, camera: CameraInput,
-             debug: bool, viewer=None) -> None:
-        """Draw the plan into ``fbo`` (the view's colour + depth): a handful of instanced draw calls."""
+             debug: bool, viewer=None, shadow: tuple | None = None) -> None:
+        """Draw the plan into ``fbo`` (the view's colour + depth): a handful of instanced draw calls.
+        ``shadow``: (the view's sun shadow map, receiver_uniforms' defines and uniforms) when it has one: the
+        plants (levels 0-3) a caster's shadow may reach are drawn apart with the look-up."""
         ctx = self.ctx
         self.draw_calls = 0
         fbo.use()
@@ -665,15 +700,25 @@ class FieldGpu:
         total = sum(counts)
         if total:
             listed = plan.plant_list if plan.plant_list is not None else np.concatenate(plan.plants)
+            receives = self._receivers(shadow[0] if shadow else None, listed)
+            self.shadowed_plants = 0 if receives is None else int(receives.sum())
             commands = self._upload_plants(self.instance_buf, self.plant_records, self.plant_variant, listed,
-                                           counts)
-            prog = self._program("plant", debug=debug, fog=fog)
-            set_uniforms(prog, **lighting, **self._plant_uniforms())
+                                           counts, receives)
+            if receives is None:
+                passes = [(self._program("plant", debug=debug, fog=fog), {}, None)]
+            else:
+                if self.multi_draw:
+                    self.command_buf.write(commands.tobytes())
+                passes = [(self._program("plant", debug=debug, fog=fog), {}, 0),
+                          (self._program("plant", debug=debug, fog=fog, shadows=shadow[1]), shadow[2], 1)]
+            for prog, uniforms, command_set in passes:
+                set_uniforms(prog, **lighting, **self._plant_uniforms(), **uniforms)
 
-            def set_level(level: int) -> None:
-                prog["debug_level"].value = level
+                def set_level(level: int, prog=prog) -> None:
+                    prog["debug_level"].value = level
 
-            self._draw_plants(prog, self.instance_buf, commands, range(LEVELS), set_level if debug else None)
+                self._draw_plants(prog, self.instance_buf, commands, range(LEVELS), set_level if debug else None,
+                                  command_set)
         # level 4 (the plan lists the rectangles nearest first)
         if rectangles:
             terrain = self._terrain_uniforms()
@@ -755,12 +800,18 @@ class GrassFieldFeature(RenderFeature):
                               band_content=gpu.band_content)
             self.plans[(frame.entity, view.name)] = plan
 
+            def setup(b):
+                opaque_setup(view)(b)
+                read_shadow(b, view)
+
             def execute(pc, gpu=gpu, plan=plan, camera=camera, debug=frame.debug):
                 gpu.prepare(plan, camera, viewer=view.name)
                 fbo = self.renderer.framebuffer(pc.get(view.color), pc.get(view.depth))
-                gpu.draw(fbo, plan, view, camera, debug, viewer=view.name)
+                shadow = view.extra.get("shadow")
+                receiving = (shadow, *receiver_uniforms(shadow, pc)) if shadow is not None else None
+                gpu.draw(fbo, plan, view, camera, debug, viewer=view.name, shadow=receiving)
 
-            graph.add_pass(f"grass_field.{frame.entity}.{view.name}", opaque_setup(view), execute)
+            graph.add_pass(f"grass_field.{frame.entity}.{view.name}", setup, execute)
 
     def release(self) -> None:
         for gpu in self.fields.values():

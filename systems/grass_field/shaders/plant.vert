@@ -1,5 +1,6 @@
 #version 330
 #include "lit.glsl"
+#include "shadow.glsl"
 #include "common.glsl"
 // Levels 0-3 (table 1), instanced: one instance per plant drawn at this level, its record (render.py's
 // plant_records) a per-instance attribute, its variant's vertices (geometry.compact_mesh) per-vertex attributes:
@@ -8,7 +9,8 @@
 // turned towards the eye.  On llvmpipe the vertex work runs once per vertex while the fragment work runs per
 // covered pixel on a handful of interpolated inputs, and the near plants cover far more pixels than they have
 // vertices.  Lines and dots (levels 2-3) have no surface and take a fixed light.
-// Variants (render.py): DEBUG_LEVELS (the debug view), FOG (the view has fog).  llvmpipe runs both sides of
+// Variants (render.py): DEBUG_LEVELS (the debug view), FOG (the view has fog), SHADOWS / SHADOW_SOFT (the sun's
+// shadow map, looked up per vertex: only the plants a caster's shadow may reach are drawn with it).  llvmpipe runs both sides of
 // every branch, so the lighting is computed once, with selects, and what a variant leaves out costs nothing.
 uniform mat4 view_proj;
 in vec4 in_a;  // the vertex: plant-local position, colour parameter (0 at the blade's root, 1 at the tip)
@@ -40,6 +42,9 @@ void main() {
     // and are drawn at 80 %
     float strength = dots ? 0.0 : (kind > 0.5 ? 0.05 : 0.02);
     float ndl = max(dot(n, sun_dir), 0.0) * p1.w;
+#ifdef SHADOWS
+    ndl *= sun_visibility(shadow_coord(world, n));
+#endif
     vec3 hemi = mix(sky_horizon * 0.35, sky_top, n.y * 0.5 + 0.5) * ambient;
     vec3 h = normalize(normalize(to_eye) + sun_dir);
     float spec = max(dot(n, h), 0.0);

@@ -365,3 +365,44 @@ def test_a_new_sun_bakes_the_lod_cache_again(tmp_path):
     finally:
         renderer.release()
         app.renderer = None
+
+
+def test_the_plants_receive_the_suns_shadow_map(tmp_path):
+    """A slab floating over the field shades the ground and the blades standing in its shadow (levels 0-3 take
+    the shadow map per vertex); the plants no caster can reach keep the plain shader."""
+    roof = """
+[[entities]]
+name = "roof"
+[entities.components.Transform]
+position = [-50.0, 30.0, -150.0]
+scale = [20.0, 2.0, 30.0]
+[entities.components.Mesh]
+shape = "box"
+color = [0.8, 0.3, 0.2]
+"""
+    grass = SMALL.replace("plants_per_cell = 16", "plants_per_cell = 64") + "grid_x = 8\ngrid_z = 8\n"
+    images, shadowed = {}, {}
+    for shadows, hide in ((True, False), (False, False), (True, True)):
+        camera = _camera((-5.0, 45.0, -150.0), yaw=90.0, pitch=-25.0)
+        camera += 'hide_features = ["grass_field"]\n' if hide else ""
+        app = _app(tmp_path, grass, camera + roof)
+        app.config.render.sun_direction = (0.2, 0.7, 1.0)  # the slab's shadow falls towards -z, in view
+        app.config.render.shadows = shadows
+        app.config.render.shadow_distance = 300.0
+        app.config.render.fog_density = 0.0
+        renderer = make_renderer(app, 160, 120)
+        try:
+            app.step(1)
+            app.render_frame()
+            images[shadows, hide] = np.asarray(renderer.read_image()).astype(float)
+            if not hide:
+                gpu = next(iter(_feature(app).fields.values()))
+                shadowed[shadows] = gpu.shadowed_plants
+                assert sum(len(p) for p in next(iter(_feature(app).plans.values())).plants) > 20
+        finally:
+            renderer.release()
+            app.renderer = None
+    assert shadowed[False] == 0 and shadowed[True] > 0
+    grass = np.abs(images[True, False] - images[True, True]).sum(axis=-1) > 20.0  # blades drawn over the ground
+    darker = (images[False, False] - images[True, False]).sum(axis=-1) > 40.0
+    assert (grass & darker).sum() > 40  # blades in the slab's shadow lost the sun
