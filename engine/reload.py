@@ -13,8 +13,9 @@ touch without a change does nothing).  On a change it re-plans the whole scene:
 The scene's settings (``[scene]``, ``[render]``) on reload:
 
 * ``fixed_dt`` and ``max_catchup_steps`` are live (the clock takes them).  The new plan is validated at the new
-  ``fixed_dt``, and so are the components of entities spawned while running (prefabs, spawners): a step that one
-  of them cannot run at (an unstable water surface) refuses the whole edit, so no system raises on the next tick;
+  ``fixed_dt``, and so are the loaded prefabs and the components of other entities spawned while running
+  (spawners): a step that one of them cannot run at (an unstable water surface) refuses the whole edit, so no
+  system raises on the next tick;
 * ``seed``: a running world keeps its random streams; the new seed applies on restart (R), and the HUD says so;
 * ``plugins``: systems and render passes cannot be swapped into a running game, so a changed list holds the
   whole edit back and says to run the game again (R rebuilds the scene with the plugins already loaded);
@@ -27,6 +28,13 @@ and the HUD says so until the file is saved again.  A failed reload also watches
 scene names but could not read: creating a missing preset or asset, or fixing a broken one, reloads.  The asset
 files a loaded scene's components read (height maps, textures) are watched too: editing one rebuilds the components
 that name it, although their config is the same.
+
+Prefabs (engine/prefab.py) are watched from their first spawn: the prefab's file, the presets it reads and the assets
+its components name.  Every reload plans the loaded prefabs again at the new step, with the scene (a problem in
+either refuses the whole edit and the library keeps spawning the last good prefabs); a valid edit is what the next
+spawns get, and the live entities spawned from it are brought up to date like a scene's entities (parameters swapped
+in place, a structural change or an edited asset rebuilds that component, scripts' parameters swapped), except that
+each keeps its own position (the spawner gave it) and its name.
 """
 
 from __future__ import annotations
@@ -42,7 +50,9 @@ from pydantic import ValidationError
 
 from engine.config import (STOCK_CONFIGS, ConfigError, Problem, locate_line, read_toml, resolve_asset,
                            resolve_inside)
-from engine.scene import EntityRecord, build_component, build_problem, plan_scene, spawn_entity
+from engine.prefab import PrefabInstance, PrefabLibrary
+from engine.registry import BuildContext
+from engine.scene import EntityPlan, EntityRecord, build_problem, plan_scene, spawn_entity
 from engine.script import Scripts, make_slot
 
 if TYPE_CHECKING:
@@ -87,12 +97,39 @@ class HotReloader:
         self._held: set[Path] = set()  # emptied files (a save in progress?) whose reload is held back
         self._prints: dict[Path, tuple] = {}
         self._assets_changed: set[Path] = set()  # asset files whose content changed since the last reload
+        self._prefabs_seen: tuple[Any, dict[str, EntityPlan]] = (None, {})  # (library, plans whose files are watched)
         self._watch(app.plan.files + self._plan_assets(app.plan))
 
     def _watch(self, files: list[Path]) -> None:
         self._prints = {Path(f): _fingerprint(Path(f)) for f in files}
+        self._prefabs_seen = (None, {})
+        self._watch_prefabs()
+
+    def _watch_prefabs(self) -> None:
+        """Watch the files of the prefabs loaded since the last look (a prefab is read when it is first spawned):
+        each prefab's file and presets as they were when read (an edit made since then reloads at this poll), and
+        the assets its components name."""
+        library = self.app.world.try_resource(PrefabLibrary)
+        if library is None:
+            return
+        seen_library, seen = self._prefabs_seen
+        if seen_library is not library:
+            seen = {}
+        for path, read in library.files.items():
+            if path not in self._prints:
+                now = _fingerprint(path)
+                self._prints[path] = now if read == now[:2] else (*(read or (None, None)), None)
+        loaded = library.loaded()
+        fresh = [plan for name, plan in loaded.items() if seen.get(name) is not plan]
+        if fresh:
+            assets = [path for path in _entity_assets(fresh, self.app.plan.configs_root) if path not in self._prints]
+            room = MAX_WATCHED_ASSETS - sum(1 for path in self._prints if path.suffix.lower() != ".toml")
+            for path in assets[:max(room, 0)]:
+                self._prints[path] = _fingerprint(path)
+        self._prefabs_seen = (library, loaded)
 
     def changed(self) -> bool:
+        self._watch_prefabs()
         found = False
         for path, old in self._prints.items():
             new = _fingerprint(path)
@@ -107,10 +144,7 @@ class HotReloader:
     def _plan_assets(self, plan) -> list[Path]:
         """The asset files (height maps, textures) the components of a loaded scene name and that exist: watched,
         so that editing one rebuilds the components that use it (their config did not change)."""
-        root = plan.configs_root
-        found = [path for ent in plan.entities for _, cfg in ent.components
-                 for path in _asset_paths(cfg.model_dump(mode="json", warnings=False), root) if path.is_file()]
-        return list(dict.fromkeys(found))[:MAX_WATCHED_ASSETS]
+        return _entity_assets(plan.entities, plan.configs_root)[:MAX_WATCHED_ASSETS]
 
     def _uses_changed_asset(self, cfg: Any) -> bool:
         if not self._assets_changed:
@@ -141,11 +175,13 @@ class HotReloader:
             return self._refuse([plugins])
         try:
             plan = plan_scene(app.plan.file, app.registry, app.plan.configs_root)
-        except ConfigError as exc:
-            return self._refuse(exc.problems, also_watch=self._named_files())
-        problems = self._time_step_problems(plan)
+        except ConfigError as exc:  # the prefabs' problems too (at the running step): every problem at once
+            _, problems = self._replan_prefabs(app.dt)
+            return self._refuse(exc.problems + problems, also_watch=self._named_files() + self._prefab_named_files())
+        prefabs, problems = self._replan_prefabs(plan.config.scene.fixed_dt)
+        problems += self._time_step_problems(plan)
         if problems:
-            return self._refuse(problems, also_watch=plan.files)
+            return self._refuse(problems, also_watch=plan.files + self._prefab_named_files())
         self._held = set()
         self.status.errors = []
         for warning in plan.warnings:
@@ -153,6 +189,7 @@ class HotReloader:
         try:  # the settings first: what is spawned or rebuilt below sees the new config and clock
             changes = self._apply_settings(plan)
             changes += self._apply(plan)
+            changes += self._apply_prefabs(prefabs, plan.config.scene.fixed_dt)
         except Exception as exc:  # noqa: BLE001 - a plugin's hook failing must not take the game down
             log.error("reload of %s failed while applying", plan.file, exc_info=exc)
             self.status.errors.append(f"{plan.file}: reload failed while applying: {type(exc).__name__}: {exc}")
@@ -230,7 +267,9 @@ class HotReloader:
         """A new ``fixed_dt`` against the entities spawned while running (prefabs, spawners): plan_scene
         validated the scene's own at the new step, these were validated at the old one.  A component whose
         config passes at the old step and fails at the new one (a water surface's stability limit) refuses the
-        edit: applied, its system would raise on the next tick."""
+        edit: applied, its system would raise on the next tick.  The components a prefab gave its entities are
+        left out: the prefab is planned again at the new step (a problem there is the prefab file's), and the
+        reload brings them to that plan."""
         from engine.builtin import Name
 
         app, world = self.app, self.app.world
@@ -238,7 +277,10 @@ class HotReloader:
         if new_dt == old_dt:
             return []
         in_scene = {record.entity for record in app.records}
-        seen: set[tuple[int, type]] = set()
+        library = world.try_resource(PrefabLibrary)
+        loaded = library.loaded() if library is not None else {}
+        seen: set[tuple[int, type]] = {(entity, type(cfg)) for entity, (instance,) in world.query(PrefabInstance)
+                                       if instance.prefab in loaded for cfg, _ in instance.components.values()}
         problems = []
         line = locate_line(_text(plan.file), ("scene", "fixed_dt"))
         for cname, spec in app.registry.components.items():
@@ -260,16 +302,30 @@ class HotReloader:
         """The files a scene that failed to load names: its presets where engine.scene looks for them (found or
         not), and the strings in its component tables and their presets that name a file under the configs root
         (a texture, a height map).  Watched until the next reload, so creating or fixing one reloads."""
-        app = self.app
-        root = app.plan.configs_root
         try:
-            data, _ = read_toml(app.plan.file)
+            data, _ = read_toml(self.app.plan.file)
         except ConfigError:
             return []
+        entities = data.get("entities")
+        return self._named_by(entities if isinstance(entities, list) else [])
+
+    def _prefab_named_files(self) -> list[Path]:
+        """:meth:`_named_files` for the loaded prefabs: the presets and assets their files name, found or not."""
+        library = self.app.world.try_resource(PrefabLibrary)
+        tables = []
+        for name in library.loaded() if library is not None else ():
+            try:
+                tables.append(read_toml(library.file_of(name))[0])
+            except (ConfigError, ValueError):
+                pass
+        return self._named_by(tables)
+
+    def _named_by(self, entities: list[Any]) -> list[Path]:
+        """The presets (where engine.scene looks for them) and the assets named by entity tables."""
+        root = self.app.plan.configs_root
         files: list[Path] = []
         assets: list[Path] = []
-        entities = data.get("entities")
-        for raw in entities if isinstance(entities, list) else ():
+        for raw in entities:
             components = raw.get("components") if isinstance(raw, dict) else None
             for cname, values in components.items() if isinstance(components, dict) else ():
                 if not isinstance(values, dict):
@@ -410,7 +466,7 @@ class HotReloader:
                 continue
             records.append(old)
             try:
-                changes += self._apply_components(plan, i, old, ent)
+                changes += self._apply_components(old, ent, plan.file, f"entities[{i}].")
                 changes += self._apply_scripts(old, ent, f"{plan.file}: entities[{i}].scripts")
             except Exception as exc:  # noqa: BLE001 - a plugin's hook failing keeps this entity as it was
                 log.error("reload of %s: entities[%d] '%s' failed", plan.file, i, ent.name, exc_info=exc)
@@ -424,38 +480,90 @@ class HotReloader:
         app.records = records
         return changes
 
-    def _apply_components(self, plan, index: int, record: EntityRecord, ent) -> list[str]:
+    # ------------------------------------------------------------------ prefabs
+    def _replan_prefabs(self, fixed_dt: float) -> tuple[dict[str, tuple[EntityPlan, dict]], list[Problem]]:
+        """The running game's loaded prefabs, planned again from their files at ``fixed_dt``, and their problems."""
+        library = self.app.world.try_resource(PrefabLibrary)
+        if library is None:
+            return {}, []
+        return library.replan(fixed_dt)
+
+    def _apply_prefabs(self, prefabs: dict[str, tuple[EntityPlan, dict]], fixed_dt: float) -> list[str]:
+        """Put the prefabs' new plans in force for the next spawns, and bring every live entity spawned from one
+        (ascending ids) to its new plan, as a scene's entity is brought to its new table, keeping its position.
+        The same change or error on many entities of one prefab is reported once, with their number."""
+        from engine.builtin import Name
+        from engine.spatial import Transform
+
+        world = self.app.world
+        library = world.try_resource(PrefabLibrary)
+        if library is None:
+            return []
+        library.use(prefabs, fixed_dt)
+        changes: dict[str, int] = {}
+        errors = len(self.status.errors)
+        for entity, (instance,) in list(world.query(PrefabInstance)):
+            if instance.prefab not in prefabs:
+                continue
+            ent = prefabs[instance.prefab][0]
+            file = library.file_of(instance.prefab)
+            name = world.try_get(entity, Name)
+            record = EntityRecord(entity, name.value if name is not None else ent.name, instance.components)
+            label = f"prefab {instance.prefab}"
+            before = world.try_get(entity, Transform)
+            try:
+                found = self._apply_components(record, ent, file, "", label)
+                found += self._apply_scripts(record, ent, f"{file}: scripts", label)
+            except Exception as exc:  # noqa: BLE001 - a plugin's hook failing keeps this entity as it was
+                log.error("reload of prefab %s: entity %d failed", file, entity, exc_info=exc)
+                self.status.errors.append(f"{file}: update failed: {type(exc).__name__}: {exc}")
+                found = [f"{label}: update failed, kept as it was"]
+            after = world.try_get(entity, Transform)
+            if before is not None and after is not None and after is not before:
+                after.position = before.position.copy()  # where it was spawned, or has gone since: not the prefab's
+            for change in found:
+                changes[change] = changes.get(change, 0) + 1
+        self.status.errors[errors:] = list(dict.fromkeys(self.status.errors[errors:]))
+        return [change if n == 1 else f"{change} ({n} entities)" for change, n in changes.items()]
+
+    # ----------------------------------------------------------------- entities
+    def _apply_components(self, record: EntityRecord, ent, file: Path, prefix: str,
+                          label: str | None = None) -> list[str]:
+        """Bring ``record``'s components to the configs of ``ent`` (an entity's plan from ``file``; problems are
+        reported at ``prefix`` + ``components.<name>``); changes are named after ``label`` (the entity's name)."""
         world, registry = self.app.world, self.app.registry
+        label = record.name if label is None else label
         changes = []
         new_names = {cname for cname, _ in ent.components}
         for cname in [c for c in record.components if c not in new_names]:
             for ctype in record.components.pop(cname)[1]:
                 if world.has(record.entity, ctype):
                     world.remove(record.entity, ctype)
-            changes.append(f"{record.name}: removed {cname}")
+            changes.append(f"{label}: removed {cname}")
         for cname, cfg in ent.components:
             old = record.components.get(cname)
             asset_edited = self._uses_changed_asset(cfg)  # same config, new height map or texture: rebuilt
             if old is not None and old[0] == cfg and not asset_edited:
                 continue
             spec = registry.component(cname)
-            key = f"entities[{index}].components.{cname}"
+            key = f"{prefix}components.{cname}"
             try:
                 swapped = old is not None and not asset_edited and self._swap_in_place(spec, old, cfg, record.entity)
             except Exception as exc:  # noqa: BLE001 - a live_update hook raised: put the old config back
                 world.add(record.entity, old[0])
-                self.status.errors.append(str(build_problem(plan.file, key, exc)))
-                changes.append(f"{record.name}.{cname}: update failed, kept the old one")
+                self.status.errors.append(str(build_problem(file, key, exc)))
+                changes.append(f"{label}.{cname}: update failed, kept the old one")
                 continue
             if swapped:
                 record.components[cname] = (cfg, old[1])
-                changes.append(f"{record.name}.{cname}: parameters updated ({', '.join(_diff(old[0], cfg))})")
+                changes.append(f"{label}.{cname}: parameters updated ({', '.join(_diff(old[0], cfg))})")
                 continue
             try:
-                built = build_component(world, registry, plan, record.entity, record.name, cname, cfg)
+                ctx = BuildContext(world, record.entity, record.name, str(file), self.app.plan.configs_root)
+                built = spec.instantiate(cfg, ctx)
             except Exception as exc:  # noqa: BLE001 - the old component stays in force
-                self.status.errors.append(str(build_problem(plan.file, key, exc)))
-                changes.append(f"{record.name}.{cname}: rebuild failed, kept the old one")
+                self.status.errors.append(str(build_problem(file, key, exc)))
+                changes.append(f"{label}.{cname}: rebuild failed, kept the old one")
                 continue
             types = [type(c) for c in built]
             for ctype in old[1] if old else []:
@@ -464,7 +572,7 @@ class HotReloader:
             for comp in built:
                 world.add(record.entity, comp)
             record.components[cname] = (cfg, types)
-            changes.append(f"{record.name}.{cname}: rebuilt" + (" (a file it reads changed)" if asset_edited else ""))
+            changes.append(f"{label}.{cname}: rebuilt" + (" (a file it reads changed)" if asset_edited else ""))
         return changes
 
     def _swap_in_place(self, spec, old: tuple[Any, list[type]], cfg: Any, entity: int) -> bool:
@@ -480,8 +588,9 @@ class HotReloader:
             spec.live_update(old_cfg, cfg, world, entity)
         return True
 
-    def _apply_scripts(self, record: EntityRecord, ent, key: str) -> list[str]:
+    def _apply_scripts(self, record: EntityRecord, ent, key: str, label: str | None = None) -> list[str]:
         world = self.app.world
+        label = record.name if label is None else label
         scripts = world.try_get(record.entity, Scripts)
         slots = scripts.slots if scripts else []
         wanted = ent.scripts
@@ -490,7 +599,7 @@ class HotReloader:
             for slot, (cls, params, enabled) in zip(slots, wanted):
                 if slot.script.params != params:
                     slot.script.params = params
-                    changes.append(f"{record.name}: script '{slot.name}' parameters updated")
+                    changes.append(f"{label}: script '{slot.name}' parameters updated")
             return changes
         new_slots = [make_slot(world, record.entity, cls, params, f"{key}[{j}]")
                      for j, (cls, params, _) in enumerate(wanted)]
@@ -500,7 +609,7 @@ class HotReloader:
             world.remove(record.entity, Scripts)
         if new_slots:
             world.add(record.entity, Scripts(new_slots))
-        return [f"{record.name}: scripts replaced"]
+        return [f"{label}: scripts replaced"]
 
 
 def _diff(old: Any, new: Any) -> list[str]:
@@ -533,6 +642,13 @@ def _unsuited(model: type, cfg: Any, old_dt: float, new_dt: float) -> str | None
         return None
 
     return problem(new_dt) if problem(old_dt) is None else None
+
+
+def _entity_assets(entities: Iterable[EntityPlan], root: Path) -> list[Path]:
+    """The asset files (height maps, textures) that the components of planned entities name and that exist."""
+    found = [path for ent in entities for _, cfg in ent.components
+             for path in _asset_paths(cfg.model_dump(mode="json", warnings=False), root) if path.is_file()]
+    return list(dict.fromkeys(found))
 
 
 def _asset_paths(table: Any, root: Path) -> list[Path]:
