@@ -930,9 +930,12 @@ class HudFeature(RenderFeature):
             self.ctx.disable(moderngl.DEPTH_TEST)
             self.ctx.enable(moderngl.BLEND)
             self.ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
-            if self._vao is None:
-                self._vao = self.ctx.vertex_array(r.load_program(SHADERS, "sprite"), [])
-            vao, prog = self._vao, self._vao.program
+            prog = r.load_program(SHADERS, "sprite")
+            if self._vao is None or self._vao.program is not prog:  # new, or F5 reloaded the shader
+                if self._vao is not None:
+                    self._vao.release()
+                self._vao = self.ctx.vertex_array(prog, [])
+            vao = self._vao
             for where, lines, size, *color in data:
                 tex = self._texture(lines, size, *color)
                 w, h = tex.size

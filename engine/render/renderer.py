@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import re
+import sys
 import time
 from dataclasses import dataclass, replace
 from collections.abc import Callable, Hashable
@@ -217,8 +218,13 @@ class Renderer:
         self.width, self.height = int(width), int(height)
         self.time = 0.0
         self.frame_index = 0
-        self._programs: dict[tuple, moderngl.Program] = {}
+        self._programs: dict[tuple, moderngl.Program] = {}  # by source (vertex, fragment, geometry, varyings)
+        self._shared: set[tuple] = set()  # the sources of the programs handed out by program(): never replaced
         self._loaded: dict[tuple, moderngl.Program] = {}  # (directory, name, defines)
+        # programs that reload_shaders replaced, released at a frame's end once no vertex array is made on them;
+        # and per program, the references to its moderngl object when it was made (before any vertex array)
+        self._retired: list[moderngl.Program] = []
+        self._own_refs: dict[moderngl.Program, int] = {}
         self._computes: dict[tuple, moderngl.ComputeShader] = {}  # (directory, name, defines)
         self._framebuffers: dict[tuple, moderngl.Framebuffer] = {}
         self.fullscreen_vaos: dict[tuple, moderngl.VertexArray] = {}  # (fragment shader, defines): passes.py
@@ -261,13 +267,27 @@ class Renderer:
     # ------------------------------------------------------------------ services
     def program(self, vertex_shader: str, fragment_shader: str, geometry_shader: str | None = None,
                 varyings: tuple[str, ...] = ()) -> moderngl.Program:
-        key = (vertex_shader, fragment_shader, geometry_shader, varyings)
+        """The program of these sources, compiled once and kept until :meth:`release` (a caller may keep it: it
+        is never replaced or released by :meth:`reload_shaders`, even when :meth:`load_program` shares it)."""
+        key = (vertex_shader, fragment_shader, geometry_shader, varyings or ())
+        self._shared.add(key)
+        return self._compiled(key)
+
+    def _compiled(self, key: tuple) -> moderngl.Program:
         prog = self._programs.get(key)
         if prog is None:
+            vertex_shader, fragment_shader, geometry_shader, varyings = key
             prog = self.ctx.program(vertex_shader=vertex_shader, fragment_shader=fragment_shader,
-                                    geometry_shader=geometry_shader, varyings=varyings or ())
+                                    geometry_shader=geometry_shader, varyings=varyings)
             self._programs[key] = prog
+            self._own_refs[prog] = sys.getrefcount(prog.mglo)
         return prog
+
+    def _vertex_arrays_on(self, prog: moderngl.Program) -> int:
+        """How many vertex arrays made on ``prog`` are not released: each holds a reference to the program's
+        moderngl object from ``ctx.vertex_array`` to ``release`` (moderngl's C code; a vertex array dropped
+        without release keeps it for good).  tests/engine/render/test_shader_reload.py checks it."""
+        return sys.getrefcount(prog.mglo) - self._own_refs[prog]
 
     def load_program(self, directory: str | Path, name: str, defines: tuple[str, ...] = ()) -> moderngl.Program:
         """``name.vert`` + ``name.frag`` (+ ``name.geom``) from ``directory``, read and compiled once (passes call
@@ -275,7 +295,11 @@ class Renderer:
 
         ``defines``: a shader variant, each name ``#define``d in every stage after its ``#version`` line (a
         software rasteriser runs both sides of a branch, so features compile variants instead of testing
-        uniforms)."""
+        uniforms).
+
+        After :meth:`reload_shaders` this returns another program when the files changed: a feature that keeps a
+        vertex array made on the program checks ``vao.program is not prog`` before it draws and remakes it (the
+        old one released), or it keeps drawing the old shader, which then stays alive for it."""
         key = (str(directory), name, tuple(defines))
         prog = self._loaded.get(key)
         if prog is not None:
@@ -287,8 +311,8 @@ class Renderer:
             return _with_defines(shader_source(path), defines)
 
         try:
-            prog = self.program(source(directory / f"{name}.vert"), source(directory / f"{name}.frag"),
-                                source(geom) if geom.exists() else None)
+            prog = self._compiled((source(directory / f"{name}.vert"), source(directory / f"{name}.frag"),
+                                   source(geom) if geom.exists() else None, ()))
         except moderngl.Error as exc:
             variant = f" ({', '.join(defines)})" if defines else ""
             raise RuntimeError(f"shader '{name}'{variant} in {directory} failed to compile:\n{exc}") from None
@@ -315,17 +339,31 @@ class Renderer:
         """Re-read every shader loaded by name (programs and compute shaders); a file that no longer compiles
         keeps its last good version.
 
+        A program replaced by an edited file is retired: :meth:`load_program` and :meth:`program` no longer hand
+        it out, and it is released at the end of a frame once no vertex array made on it is left (features
+        remake theirs when they next draw, see :meth:`load_program`), so nothing draws with a released program.
+        Compute shaders are not kept by features (they call :meth:`load_compute` each time): the old ones are
+        released at once.
+
         Returns the compile errors (empty when all compiled).  F5 in the window calls this with the config reload.
         """
         errors = []
         self._shader_generation += 1
+        replaced = []
         for key in list(self._loaded):
             old = self._loaded.pop(key)
             try:
-                self.load_program(*key)
+                if self.load_program(*key) is not old:
+                    replaced.append(old)
             except (RuntimeError, OSError) as exc:
                 self._loaded[key] = old
                 errors.append(str(exc))
+        in_use = {id(prog) for prog in self._loaded.values()}
+        for old in {id(prog): prog for prog in replaced}.values():
+            source = next((key for key, prog in self._programs.items() if prog is old), None)
+            if id(old) not in in_use and source is not None and source not in self._shared:  # else kept: another
+                del self._programs[source]  # loaded variant or a caller of program() has it
+                self._retired.append(old)
         for key in list(self._computes):
             old = self._computes.pop(key)
             try:
@@ -542,6 +580,19 @@ class Renderer:
         self.frame_index += 1
         if self.screen is not None:
             self.ctx.copy_framebuffer(self.screen, self._final_fbo)
+        self._release_retired()
+
+    def _release_retired(self) -> None:
+        """Release the programs :meth:`reload_shaders` replaced that no vertex array is made on any more (the
+        features that drew this frame have remade theirs); the others wait for a later frame."""
+        held = []
+        for prog in self._retired:
+            if self._vertex_arrays_on(prog):
+                held.append(prog)
+            else:
+                del self._own_refs[prog]
+                prog.release()
+        self._retired = held
 
     def _declare_view_targets(self, graph, view: View) -> None:
         def setup(b):
@@ -998,9 +1049,12 @@ class Renderer:
         for fbo in self._framebuffers.values():
             fbo.release()
         self._framebuffers.clear()
-        for prog in self._programs.values():
+        for prog in [*self._programs.values(), *self._retired]:
             prog.release()
         self._programs.clear()
+        self._retired.clear()
+        self._own_refs.clear()
+        self._shared.clear()
         self._loaded.clear()
         for shader in self._computes.values():
             shader.release()

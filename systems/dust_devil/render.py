@@ -233,8 +233,10 @@ class DustDevilParticles(RenderFeature):
         buf = self._particle_buffer(devil)
         vaos = self._buffers[devil.entity][1]
         key = (program, defines)
-        if key not in vaos:
-            prog = self.renderer.load_program(SHADERS, program, defines)
+        prog = self.renderer.load_program(SHADERS, program, defines)
+        if key not in vaos or vaos[key].program is not prog:  # new, or F5 reloaded the shader
+            if key in vaos:
+                vaos[key].release()
             vaos[key] = self.ctx.vertex_array(prog, [(buf, "3f", "in_position")])
         return vaos[key]
 
@@ -560,12 +562,12 @@ class DustDevilMarkers(RenderFeature):
 
     def _vao(self, count: int) -> tuple[moderngl.VertexArray, moderngl.Buffer]:
         needed = max(count, 9) * self.INSTANCE_FLOATS * 4
-        if self._gl is None or self._gl[1].size < needed:
+        prog = self.renderer.load_program(ENGINE_SHADERS, "mesh", ("FOG",))  # small: fog always compiled in
+        if self._gl is None or self._gl[1].size < needed or self._gl[0].program is not prog:  # or F5 reloaded it
             self.release()
             verts, idx = primitive("sphere", MARKER_SEGMENTS)
             inst = self.ctx.buffer(reserve=needed)
             vbo, ibo = self.ctx.buffer(verts.tobytes()), self.ctx.buffer(idx.tobytes())
-            prog = self.renderer.load_program(ENGINE_SHADERS, "mesh", ("FOG",))  # small: fog always compiled in
             vao = self.ctx.vertex_array(prog, [(vbo, "3f 3f", "in_position", "in_normal"),
                                                (inst, "4f 4f 4f 4f 4f/i", "m0", "m1", "m2", "m3", "in_color")], ibo)
             self._gl = (vao, inst, vbo, ibo)

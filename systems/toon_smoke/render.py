@@ -167,6 +167,9 @@ class ToonSmokeFeature(RenderFeature):
 
     def _upload(self, draw: VolumeDraw) -> _GpuMesh | None:
         gpu = self._meshes.get(draw.entity)
+        if gpu is not None and gpu.vao.program is not self._program():  # F5 reloaded the shader: remake its VAO
+            gpu.vao.release()
+            gpu.vao = self.ctx.vertex_array(self._program(), [(gpu.vbo, "3f 3f", "in_position", "in_normal")], gpu.ibo)
         if draw.mesh is None or (gpu is not None and gpu.version == draw.mesh_version):
             return gpu  # unchanged, or already uploaded for an earlier view this frame
         verts, indices = draw.mesh
@@ -200,9 +203,12 @@ class ToonSmokeFeature(RenderFeature):
     def _sphere_vao(self) -> moderngl.VertexArray:
         if self._sphere is None:
             verts, idx = primitive("sphere")
-            vbo, ibo = self.ctx.buffer(verts.tobytes()), self.ctx.buffer(idx.tobytes())
+            self._sphere_buffers = (self.ctx.buffer(verts.tobytes()), self.ctx.buffer(idx.tobytes()))
+        if self._sphere is None or self._sphere.program is not self._program():  # new, or F5 reloaded the shader
+            if self._sphere is not None:
+                self._sphere.release()
+            vbo, ibo = self._sphere_buffers
             self._sphere = self.ctx.vertex_array(self._program(), [(vbo, "3f 3f", "in_position", "in_normal")], ibo)
-            self._sphere_buffers = (vbo, ibo)
         return self._sphere
 
     # ------------------------------------------------------------------- passes
@@ -271,10 +277,11 @@ class ToonSmokeFeature(RenderFeature):
         fbo.use()
         fbo.viewport = rect  # the full-screen triangle covers the rectangle; gl_FragCoord stays in view pixels
         self.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
-        if self._outline_vao is None:
-            prog = self.renderer.load_program(SHADERS, "outline")
+        prog = self.renderer.load_program(SHADERS, "outline")
+        if self._outline_vao is None or self._outline_vao.program is not prog:  # new, or F5 reloaded the shader
+            if self._outline_vao is not None:
+                self._outline_vao.release()
             self._outline_vao = self.ctx.vertex_array(prog, [])
-        prog = self._outline_vao.program
         pc.get(edges_handle).use(0)
         prog["edges"].value = 0
         size = -(-(max(draw.index for draw in data) + 1) // OUTLINE_BATCH) * OUTLINE_BATCH

@@ -86,11 +86,11 @@ class WaterFeature(RenderFeature):
         buf.ibo.write(idx.tobytes())
         wire = item["wire"]
         if wire is not None:
-            if buf.wire_vbo is None or buf.wire_vbo.size < wire.nbytes:
-                if buf.wire_vao is not None:
+            prog = self.renderer.load_program(SHADERS, "wire")
+            if buf.wire_vbo is None or buf.wire_vbo.size < wire.nbytes or buf.wire_vao.program is not prog:
+                if buf.wire_vao is not None:  # grown, or F5 reloaded the shader
                     buf.wire_vao.release()
                     buf.wire_vbo.release()
-                prog = self.renderer.load_program(SHADERS, "wire")
                 buf.wire_vbo = self.ctx.buffer(reserve=max(wire.nbytes * 2, 1024))
                 buf.wire_vao = self.ctx.vertex_array(prog, [(buf.wire_vbo, "3f 3f", "in_position", "in_color")])
             buf.wire_vbo.write(wire.tobytes())
