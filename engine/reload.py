@@ -489,9 +489,10 @@ class HotReloader:
         return library.replan(fixed_dt)
 
     def _apply_prefabs(self, prefabs: dict[str, tuple[EntityPlan, dict]], fixed_dt: float) -> list[str]:
-        """Put the prefabs' new plans in force for the next spawns, and bring every live entity spawned from one
-        (ascending ids) to its new plan, as a scene's entity is brought to its new table, keeping its position.
-        The same change or error on many entities of one prefab is reported once, with their number."""
+        """Put the prefabs' new plans in force for the next spawns (a line names each prefab that changed), and
+        bring every live entity spawned from one (ascending ids) to its new plan, as a scene's entity is brought to
+        its new table, keeping its position.  The same change or error on many entities of one prefab is reported
+        once, with their number."""
         from engine.builtin import Name
         from engine.spatial import Transform
 
@@ -499,8 +500,10 @@ class HotReloader:
         library = world.try_resource(PrefabLibrary)
         if library is None:
             return []
+        before = library.loaded()
         library.use(prefabs, fixed_dt)
-        changes: dict[str, int] = {}
+        changes: dict[str, int] = {f"prefab {name}: the next spawns take the edit": 1
+                                   for name, (plan, _) in prefabs.items() if before.get(name) != plan}
         errors = len(self.status.errors)
         for entity, (instance,) in list(world.query(PrefabInstance)):
             if instance.prefab not in prefabs:

@@ -70,7 +70,8 @@ def test_a_preset_only_a_prefab_reads_is_watched_and_reaches_live_entities_and_t
     assert not game.reloader.poll()  # the prefab's files are watched from its spawn: unchanged, nothing to do
     game.preset.write_text("rate = 10.0\n")
     assert game.reloader.poll() and game.reloader.status.errors == []  # the old code did not watch the preset
-    assert "prefab tank.Pump: parameters updated (rate)" in game.reloader.status.last_changes
+    assert game.reloader.status.last_changes == ["prefab tank: the next spawns take the edit",
+                                                 "prefab tank.Pump: parameters updated (rate)"]
     game.app.step(1)
     assert game.state(tank) is state and state.levels[0] == 14.0  # live, the simulation state kept
     assert np.array_equal(game.app.world.get(tank, Transform).position, [1.0, 2.0, 3.0])
@@ -172,7 +173,7 @@ def test_a_height_map_a_prefab_names_is_watched(tmp_path):
     assert not game.reloader.poll()
     Image.fromarray(np.full((9, 9), 200, np.uint8), "L").save(heightmap)
     assert game.reloader.poll() and game.reloader.status.errors == []
-    assert "prefab mound.Terrain: rebuilt (a file it reads changed)" in game.reloader.status.last_changes
+    assert game.reloader.status.last_changes == ["prefab mound.Terrain: rebuilt (a file it reads changed)"]
     assert np.allclose(game.app.world.get(mound, Terrain).field.heights, 200 / 255 * 10.0)
     assert np.array_equal(game.app.world.get(mound, Transform).position, [5.0, 0.0, 5.0])
 
