@@ -9,10 +9,14 @@ to one direction): for every grid point p, the **shadow height**
 
 where u is the sun's horizontal direction and θ its elevation: a point straight above or below p is in the
 terrain's shadow exactly when its height is below S(p) (the ray from it towards the sun enters the ground).  It
-is found in one sweep over the grid from the sun's side, :func:`shadow_heights`, each column (or row, along the
-sun's dominant axis) from the one before it: S(p) = max(h(p), S(p + step) − |step|·tan θ), the previous
-column's S interpolated linearly at the step's fractional row.  Axis-aligned and diagonal suns are exact; others
-lose a little to the interpolation (a blur of a fraction of a cell across the sun's path).
+is found column by column (or row by row, along the sun's dominant axis) from the sun's side, :func:`shadow_heights`:
+the first few columns along each grid point's own ray, the rest along parallel lines towards the sun one row
+apart, each line's S past a column from the one past the next, S = max(ground, S_next − |step|·tan θ), with the
+field's bilinear surface sampled where the line crosses each column; a grid point takes the two lines beside its
+ray.  Axis-aligned and diagonal suns are exact; others blur the shadows of the farther occluders by less than a
+row across the sun's path, the same at any distance.  (Taking each column's S from the previous column's,
+interpolated at the step's fractional row, blurs sideways at every step: a narrow peak's shadow lost half its
+length 100 cells out.)
 
 The map is re-made only when the sun, the height field or its placement changes.  Receivers read it with a
 bilinear fetch: a point at local height y over (x, z) gets the sun's light times
@@ -39,6 +43,7 @@ __all__ = ["TERRAIN_SHADOW_UNIT", "TerrainShadow", "penumbra_height", "shadow_he
 TERRAIN_SHADOW_UNIT = 6  # the texture unit receivers bind the map to (the sun's shadow map takes 7, features 0-5)
 
 _BELOW = 1e30  # S where the sun is at or below the horizon: every point is under it
+_NEAR = 8  # columns towards the sun followed along each grid point's own ray before the lines take over
 
 
 def sun_in_local(model: np.ndarray, sun_dir: np.ndarray) -> np.ndarray:
@@ -77,33 +82,53 @@ def shadow_heights(heights: np.ndarray, spacing: float, sun: np.ndarray) -> np.n
         along, across = float(sun[2]), float(sun[0])
     else:
         along, across = float(sun[0]), float(sun[2])
+    if along < 0.0:  # mirrored so that the sun lies towards the higher columns
+        h = h[:, ::-1]
     rows, cols = h.shape
     slope = across / abs(along)  # rows moved per column stepped towards the sun, |slope| <= 1
     drop = spacing * np.sqrt(1.0 + slope * slope) * _tan_elevation(sun)
-    shift = int(np.floor(slope))
-    t = slope - shift
-    floor = float(h.min()) - 1e9  # "no occluder": rows whose step leaves the grid
-    src = np.arange(rows) + shift
-    lo_ok = (src >= 0) & (src < rows)
-    hi_ok = (src + 1 >= 0) & (src + 1 < rows)
-    lo_idx, hi_idx = np.clip(src, 0, rows - 1), np.clip(src + 1, 0, rows - 1)
-    s = np.empty_like(h)
-    step = 1 if along > 0.0 else -1
-    order = range(cols - 1, -1, -1) if step > 0 else range(cols)
-    prev = None
-    for c in order:
-        if prev is None:
-            s[:, c] = h[:, c]
-        else:
-            lo = np.where(lo_ok, prev[lo_idx], floor)
-            hi = np.where(hi_ok, prev[hi_idx], floor) if t > 0.0 else lo
-            if t > 0.0:  # a fractional row: both neighbours must lie on the grid
-                reached = lo + (hi - lo) * t
-                reached[~(lo_ok & hi_ok)] = floor
-            else:
-                reached = lo
-            s[:, c] = np.maximum(h[:, c], reached - drop)
-        prev = s[:, c]
+    offset = np.arange(cols + _NEAR) * slope  # a ray's row, column by column, from where it starts
+    shift = np.floor(offset).astype(np.int64)
+    t = offset - shift
+    floor = float(h.min()) - 1e9  # "no occluder" beside the grid (a ray between the last row and the one
+    # beyond it has left the grid too: that row's share sinks it)
+    # near: the first columns along each grid point's own ray, each step a shifted copy of the grid
+    margin = _NEAR + 1
+    padded = np.full((rows + 2 * margin, cols + _NEAR), floor)
+    padded[margin:margin + rows, :cols] = h
+    s = h.copy()
+    for j in range(1, _NEAR):
+        lo = padded[margin + shift[j]:margin + shift[j] + rows + 1, j:j + cols]
+        sample = lo[1:] - lo[:-1]
+        sample *= t[j]
+        sample += lo[:-1]
+        sample -= j * drop
+        np.maximum(s, sample, out=s)
+    # far: lines towards the sun, line k crossing column c at row k + shift[c] + t[c] (the column's linear
+    # interpolation is the field's bilinear surface there), each line's S past each column in one sweep; a grid
+    # point's ray runs between lines r - shift[c] - 1 and r - shift[c], t[c] and 1 - t[c] of a row away, and
+    # parallel to them: one interpolation, however far the shadow reaches
+    low, high = int(shift[:cols].min()), int(shift[:cols].max())
+    first, n = -high - 1, rows + high - low + 1  # the lines' first number and their count
+    pad = high - low + 1
+    columns = np.full((cols, pad + n), floor)  # the grid's columns, contiguous, "no occluder" around
+    columns[:, pad:pad + rows] = h.T
+    along_line = np.empty((cols, n))  # per column and line: S of the line's points past that column
+    beyond = np.full(n, floor)  # the line's S at the column stepped from, the ground there included
+    for c in range(cols - 1, -1, -1):
+        along_line[c] = beyond - drop
+        column = columns[c, pad + first + shift[c]:]
+        ground = column[:n] if t[c] == 0.0 else (1.0 - t[c]) * column[:n] + t[c] * column[1:n + 1]
+        beyond = np.maximum(ground, beyond - drop)
+    past = np.minimum(np.arange(cols) + _NEAR - 1, cols - 1)  # where the near steps ended
+    windows = np.lib.stride_tricks.sliding_window_view(along_line[past], rows + 1, axis=1)
+    beside = windows[np.arange(cols), -shift[:cols] - first - 1].T  # (rows + 1, cols): lines k - 1 and k
+    far = beside[1:] - beside[:-1]
+    far *= 1.0 - t[:cols]
+    far += beside[:-1] - (_NEAR - 1) * drop
+    np.maximum(s, far, out=s)
+    if along < 0.0:
+        s = s[:, ::-1]
     return s.T.copy() if transposed else s
 
 
