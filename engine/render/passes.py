@@ -524,7 +524,7 @@ class MeshFeature(RenderFeature):
     def static_key(self, view: View, data) -> Any:
         """Every instance's matrix, colour and emission, and the view's shadow map: unchanged while nothing
         moves."""
-        terrain = self.renderer.terrain_shadow
+        terrain = self.renderer.terrain_shadow_in(view)
         return (shadow_key(view), None if terrain is None else terrain.key) + tuple(
             (shape, inst.tobytes(), casters) for shape, (inst, casters) in sorted(data.items()))
 
@@ -611,7 +611,7 @@ class MeshFeature(RenderFeature):
             lighting = lighting_uniforms(self.renderer, view)
             shadow_defines, shadow_uniforms = receiver_uniforms(shadow, pc)
             defines = (("FOG",) if lighting["fog_density"] > 0.0 else ()) + shadow_defines
-            terrain = self.renderer.terrain_shadow
+            terrain = self.renderer.terrain_shadow_in(view)
             if terrain is not None:
                 defines += ("TERRAIN_SHADOW",)
                 shadow_uniforms = {**shadow_uniforms, **terrain.uniforms(self.ctx)}

@@ -29,6 +29,7 @@ from engine.spatial import Transform
 
 if TYPE_CHECKING:
     from engine.app import App
+    from engine.render.terrain_shadow import TerrainShadow
     from engine.world import World
 
 log = logging.getLogger("engine.render")
@@ -415,6 +416,12 @@ class Renderer:
             self._free_resource(self._final)
         self._final = self.ctx.texture((self.width, self.height), 4)
         self._final_fbo = self.framebuffer(self._final)
+
+    def terrain_shadow_in(self, view: View) -> TerrainShadow | None:
+        """The terrain shadow that features receive in ``view``: :attr:`terrain_shadow`, or None where the view
+        hides the terrain (Camera ``hide_features``: a feature hidden in a view casts no shadow there, as with the
+        sun's shadow maps)."""
+        return None if "terrain" in view.extra.get("hide", ()) else self.terrain_shadow
 
     def use_settings(self, settings) -> None:
         """Draw with ``[render]`` settings (engine.scene.RenderSettings; a hot reload passes the new ones): most

@@ -33,6 +33,7 @@ from engine.render.feature import OPAQUE, RenderFeature, View
 from engine.render.passes import lighting_uniforms, opaque_setup, set_uniforms
 from engine.render.renderer import shader_source
 from engine.render.shadows import may_be_shadowed, read_shadow, receiver_uniforms
+from engine.render.terrain_shadow import TerrainShadow
 from engine.spatial import Transform
 from systems.grass_field.frame import FramePlan, band_apothem, band_sector_content, plan_frame
 from systems.grass_field.geometry import DRAW_GROUPS, LEVELS, CompactMesh, compact_mesh
@@ -447,10 +448,11 @@ class FieldGpu:
         return len(cells)
 
     # ------------------------------------------------------------------------------------ level 5 (band)
-    def _band_key(self, cell: int, camera: CameraInput, viewer=None,
-                  apothem: float | None = None) -> tuple[int, int, float]:
+    def _band_key(self, cell: int, camera: CameraInput, viewer=None, apothem: float | None = None,
+                  terrain_shadow: bool = True) -> tuple[int, int, float, bool]:
         """(cell, eye height above the cell in steps of half a plant height, the band's apothem: the plan's, or
-        :func:`~systems.grass_field.frame.band_apothem` of ``camera``).  The step in use is kept until the eye is
+        :func:`~systems.grass_field.frame.band_apothem` of ``camera``, whether the images hold the terrain's
+        shadow: ``terrain_shadow`` and the renderer has one).  The step in use is kept until the eye is
         three quarters of a step away from it (hysteresis: an eye hovering at a step boundary, as a camera
         following a walker does, would otherwise re-bake the band at every crossing); per ``viewer``."""
         ground = float(self.data.placed.cell_centre[cell, 1])
@@ -459,16 +461,18 @@ class FieldGpu:
         last = self._band_levels.get(viewer)
         if last is None or abs(level - last) > 0.75:
             last = self._band_levels[viewer] = int(np.floor(level + 0.5))
-        return cell, last, band_apothem(self.cfg, self.data, camera) if apothem is None else apothem
+        return (cell, last, band_apothem(self.cfg, self.data, camera) if apothem is None else apothem,
+                terrain_shadow and self.renderer.terrain_shadow is not None)
 
     def ensure_band(self, cell: int, camera: CameraInput, prefetch: int = 1, viewer=None,
-                    apothem: float | None = None) -> _BandEntry:
+                    apothem: float | None = None, terrain_shadow: bool = True) -> _BandEntry:
         """The band images of ``cell`` (baked now if missing), and up to ``prefetch`` neighbours baked ahead:
         those the viewer is heading for (ahead of its motion since the last frame, nearest the heading first),
         so a walk bakes about one cell per cell crossed instead of every neighbour it passes; none while it
-        stands still.  ``viewer``: whose motion and height step these are (a view's name)."""
+        stands still.  ``viewer``: whose motion and height step these are (a view's name); ``terrain_shadow``:
+        whether its view receives the terrain's shadow (not where it hides the terrain)."""
         self._band_resolution(camera)
-        key = self._band_key(cell, camera, viewer, apothem)
+        key = self._band_key(cell, camera, viewer, apothem, terrain_shadow)
         entry = self.band_entries.get(key)
         if entry is None:
             entry = self._bake_band(key, camera)
@@ -539,7 +543,7 @@ class FieldGpu:
                                              depth_attachment=self.band_depth)
         self.band_fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
 
-    def _bake_band(self, key: tuple[int, int, float], camera: CameraInput) -> _BandEntry:
+    def _bake_band(self, key: tuple[int, int, float, bool], camera: CameraInput) -> _BandEntry:
         """Capture the far surroundings of cell ``key[0]`` in 12 directions from its centre (section 6)."""
         cfg, placed = self.cfg, self.data.placed
         cell = key[0]
@@ -568,11 +572,11 @@ class FieldGpu:
             slot = len(self.band_entries)
         entry = _BandEntry(slot, eye, bottom, top, content, apothem)
         self.band_entries[key] = entry
-        self._render_band(entry, far)
+        self._render_band(entry, far, self.renderer.terrain_shadow if key[3] else None)
         self.band_bakes += 1
         return entry
 
-    def _render_band(self, entry: _BandEntry, far: np.ndarray) -> None:
+    def _render_band(self, entry: _BandEntry, far: np.ndarray, terrain: TerrainShadow | None = None) -> None:
         placed = self.data.placed
         rel = placed.cell_centre[far][:, [0, 2]] - entry.eye[[0, 2]]
         face = np.arctan2(-rel[:, 1], -rel[:, 0])
@@ -585,9 +589,8 @@ class FieldGpu:
         fbo.use()
         self.ctx.enable(moderngl.DEPTH_TEST)
         self.ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
-        terrain = self.renderer.terrain_shadow
         prog = self._program("impostor", band_distance=True, terrain_shadow=terrain is not None)
-        set_uniforms(prog, **self._lighting(None), **self._terrain_uniforms())
+        set_uniforms(prog, **self._lighting(None), **self._terrain_uniforms(terrain))
         vao = self._vao(prog, ("impostor",))
         self.atlas.use(0)
         self.bounds_tex.use(1)
@@ -633,10 +636,9 @@ class FieldGpu:
         return 6 * len(quads)
 
     # ---------------------------------------------------------------------------------------- drawing
-    def _terrain_uniforms(self) -> dict[str, Any]:
-        """terrain_shadow.glsl's uniforms and the level-4 images' shaded colour factor (impostor.frag), or
-        nothing without a terrain shadow."""
-        terrain = self.renderer.terrain_shadow
+    def _terrain_uniforms(self, terrain: TerrainShadow | None) -> dict[str, Any]:
+        """terrain_shadow.glsl's uniforms for ``terrain`` and the level-4 images' shaded colour factor
+        (impostor.frag), or nothing without one."""
         if terrain is None:
             return {}
         r = self.renderer
@@ -667,13 +669,15 @@ class FieldGpu:
                 self.band_entries.clear()
         self._light_key, self._terrain_key = light, terrain_key
 
-    def prepare(self, plan: FramePlan, camera: CameraInput, viewer=None) -> None:
-        """Bake what this frame needs and is not cached yet (the LOD cache; the viewer cell's band)."""
+    def prepare(self, plan: FramePlan, camera: CameraInput, viewer=None, terrain_shadow: bool = True) -> None:
+        """Bake what this frame needs and is not cached yet (the LOD cache; the viewer cell's band, with the
+        terrain's shadow unless ``terrain_shadow`` is off: a view that hides the terrain)."""
         self.sync_lighting()
         if len(plan.impostor_cells) or plan.band_cell is not None:
             self.ensure_impostors()
         if plan.band_cell is not None:
-            self.ensure_band(plan.band_cell, camera, viewer=viewer, apothem=plan.band_apothem)
+            self.ensure_band(plan.band_cell, camera, viewer=viewer, apothem=plan.band_apothem,
+                             terrain_shadow=terrain_shadow)
 
     def draw(self, fbo: moderngl.Framebuffer, plan: FramePlan, view: View, camera: CameraInput,
              debug: bool, viewer=None, shadow: tuple | None = None) -> None:
@@ -687,12 +691,14 @@ class FieldGpu:
         ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
         lighting = self._lighting(view)
         fog = lighting["fog_density"] > 0.0
+        terrain = self.renderer.terrain_shadow_in(view)
         # uploads first: writing a buffer that the frame's pending draws use would make the driver wait
         rectangles = self._impostor_instances(plan.impostor_cells, plan.impostor_face, plan.impostor_views,
                                               plan.impostor_blend, 4)
         band_vertices, band = 0, None
         if plan.band_cell is not None and plan.band_sides.any():
-            band = self.band_entries[self._band_key(plan.band_cell, camera, viewer, plan.band_apothem)]
+            band = self.band_entries[self._band_key(plan.band_cell, camera, viewer, plan.band_apothem,
+                                                    terrain is not None)]
             band_vertices = self._band_quads(band, plan.band_sides & band.content)
         # levels 0-3: one plant list (each level's plants nearest first, for early depth rejection), one draw
         # per level and primitive type
@@ -704,13 +710,15 @@ class FieldGpu:
             self.shadowed_plants = 0 if receives is None else int(receives.sum())
             commands = self._upload_plants(self.instance_buf, self.plant_records, self.plant_variant, listed,
                                            counts, receives)
+            shaded = terrain is not None
             if receives is None:
-                passes = [(self._program("plant", debug=debug, fog=fog), {}, None)]
+                passes = [(self._program("plant", debug=debug, fog=fog, terrain_shadow=shaded), {}, None)]
             else:
                 if self.multi_draw:
                     self.command_buf.write(commands.tobytes())
-                passes = [(self._program("plant", debug=debug, fog=fog), {}, 0),
-                          (self._program("plant", debug=debug, fog=fog, shadows=shadow[1]), shadow[2], 1)]
+                passes = [(self._program("plant", debug=debug, fog=fog, terrain_shadow=shaded), {}, 0),
+                          (self._program("plant", debug=debug, fog=fog, terrain_shadow=shaded, shadows=shadow[1]),
+                           shadow[2], 1)]
             for prog, uniforms, command_set in passes:
                 set_uniforms(prog, **lighting, **self._plant_uniforms(), **uniforms)
 
@@ -721,10 +729,9 @@ class FieldGpu:
                                   command_set)
         # level 4 (the plan lists the rectangles nearest first)
         if rectangles:
-            terrain = self._terrain_uniforms()
-            prog = self._program("impostor", debug=debug, fog=fog, terrain_shadow=bool(terrain))
+            prog = self._program("impostor", debug=debug, fog=fog, terrain_shadow=terrain is not None)
             set_uniforms(prog, **{**lighting, **self._impostor_uniforms(view.view_proj, view.camera_pos, view.ortho),
-                                  **terrain})
+                                  **self._terrain_uniforms(terrain)})
             self.atlas.use(0)
             self.bounds_tex.use(1)
             self._vao(prog, ("impostor",)).render(moderngl.TRIANGLE_STRIP, vertices=4, instances=rectangles)
@@ -805,7 +812,8 @@ class GrassFieldFeature(RenderFeature):
                 read_shadow(b, view)
 
             def execute(pc, gpu=gpu, plan=plan, camera=camera, debug=frame.debug):
-                gpu.prepare(plan, camera, viewer=view.name)
+                gpu.prepare(plan, camera, viewer=view.name,
+                            terrain_shadow=self.renderer.terrain_shadow_in(view) is not None)
                 fbo = self.renderer.framebuffer(pc.get(view.color), pc.get(view.depth))
                 shadow = view.extra.get("shadow")
                 receiving = (shadow, *receiver_uniforms(shadow, pc)) if shadow is not None else None

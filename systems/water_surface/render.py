@@ -111,7 +111,7 @@ class WaterFeature(RenderFeature):
             self.ctx.enable(moderngl.DEPTH_TEST | moderngl.BLEND)
             self.ctx.disable(moderngl.CULL_FACE)
             self.ctx.blend_func = moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA
-            terrain = self.renderer.terrain_shadow  # the hills' shadow (engine/render/terrain_shadow.py)
+            terrain = self.renderer.terrain_shadow_in(view)  # the hills' shadow (engine/render/terrain_shadow.py)
             water = self.renderer.load_program(SHADERS, "water", ("TERRAIN_SHADOW",) if terrain is not None else ())
             lights = lighting_uniforms(self.renderer, view)
             set_uniforms(water, **lights, **({} if terrain is None else terrain.uniforms(self.ctx)))

@@ -9,9 +9,10 @@
 // turned towards the eye.  On llvmpipe the vertex work runs once per vertex while the fragment work runs per
 // covered pixel on a handful of interpolated inputs, and the near plants cover far more pixels than they have
 // vertices.  Lines and dots (levels 2-3) have no surface and take a fixed light.
-// Variants (render.py): DEBUG_LEVELS (the debug view), FOG (the view has fog), SHADOWS / SHADOW_SOFT (the sun's
-// shadow map, looked up per vertex: only the plants a caster's shadow may reach are drawn with it).  llvmpipe runs both sides of
-// every branch, so the lighting is computed once, with selects, and what a variant leaves out costs nothing.
+// Variants (render.py): DEBUG_LEVELS (the debug view), FOG (the view has fog), TERRAIN_SHADOW (the view receives
+// the terrain's shadow: i_p1.w scales the sun's light), SHADOWS / SHADOW_SOFT (the sun's shadow map, looked up
+// per vertex: only the plants a caster's shadow may reach are drawn with it).  llvmpipe runs both sides of every
+// branch, so the lighting is computed once, with selects, and what a variant leaves out costs nothing.
 uniform mat4 view_proj;
 in vec4 in_a;  // the vertex: plant-local position, colour parameter (0 at the blade's root, 1 at the tip)
 in vec4 in_b;  // normal, kind (0 tube, 1 leaf, 2 line or dot)
@@ -41,7 +42,10 @@ void main() {
     // lit.glsl's shade() with shininess 16 as four squarings; lines and dots have no specular term (strength 0)
     // and are drawn at 80 %
     float strength = dots ? 0.0 : (kind > 0.5 ? 0.05 : 0.02);
-    float ndl = max(dot(n, sun_dir), 0.0) * p1.w;
+    float ndl = max(dot(n, sun_dir), 0.0);
+#ifdef TERRAIN_SHADOW
+    ndl *= p1.w;
+#endif
 #ifdef SHADOWS
     ndl *= sun_visibility(shadow_coord(world, n));
 #endif

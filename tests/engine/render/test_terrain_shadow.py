@@ -223,6 +223,20 @@ def test_meshes_in_the_terrains_shadow_lose_the_suns_light(tmp_path):
     np.testing.assert_allclose(on[lit], off[lit], atol=1.0)
 
 
+def test_a_view_that_hides_the_terrain_gets_none_of_its_shadow(tmp_path):
+    """Camera hide_features = ["terrain"]: the wall is not drawn there, so it shades nothing there either (as a
+    hidden feature casts nothing into the sun's shadow maps)."""
+    path = _scene(tmp_path, BOXES)
+    with open(path) as f:
+        text = f.read()
+    with open(path, "w") as f:
+        f.write(text.replace("distance = 40.0\n", 'distance = 40.0\nhide_features = ["terrain"]\n'))
+    on, view, _ = _render(path, True)
+    off, _, _ = _render(path, False)
+    assert on[_pixel(view, (0.0, 0.5, -6.0))].sum() > 100.0  # the box behind the wall is drawn
+    np.testing.assert_array_equal(on, off)
+
+
 def test_nothing_changes_where_the_terrain_casts_no_shadow(tmp_path):
     path = _scene(tmp_path, BOXES, render="")
     flat = _render(path, True, setup=lambda app: None)[0]

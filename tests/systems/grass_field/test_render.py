@@ -344,6 +344,41 @@ def test_the_terrains_shadow_falls_on_the_grass(tmp_path, far):
     assert ((off - on).sum(axis=-1) < -3.0).sum() == 0  # nothing brighter
 
 
+@pytest.mark.parametrize("case", ["near", "far", "band"])
+def test_a_view_that_hides_the_terrain_gets_none_of_its_shadow_on_the_grass(tmp_path, case):
+    """Camera hide_features = ["terrain"]: the plants, the level-4 images and the band are lit as without the
+    terrain's shadow (the hidden wall shades nothing in that view)."""
+    grass, camera = {
+        "near": (SMALL.replace("plants_per_cell = 16", "plants_per_cell = 64") + "grid_x = 8\ngrid_z = 8\n",
+                 _camera((-5.0, 45.0, -150.0), yaw=90.0, pitch=-25.0)),
+        "far": (SMALL.replace("plants_per_cell = 16", "plants_per_cell = 64") + "grid_x = 8\ngrid_z = 8\n",
+                _camera((-60.0, 900.0, 700.0), pitch=-52.0)),
+        "band": (SMALL + "grid_x = 24\ngrid_z = 24\n", _camera((0.0, 40.0, 0.0), yaw=180.0, pitch=-3.0))}[case]
+    images = {}
+    for on in (True, False):
+        app = _app(tmp_path, grass, camera + 'hide_features = ["terrain"]\n')
+        app.config.render.sun_direction = (1.0, 0.5, 0.0)
+        app.config.render.terrain_shadows = on
+        app.config.render.shadows = False
+        _walled(app, 100.0)
+        renderer = make_renderer(app, 160, 120)
+        try:
+            app.step(1)
+            app.render_frame()
+            images[on] = np.asarray(renderer.read_image()).astype(float)
+            assert (renderer.terrain_shadow is not None) == on
+            gpu = next(iter(_feature(app).fields.values()))
+            plan = next(iter(_feature(app).plans.values()))
+            assert {"near": sum(len(p) for p in plan.plants) > 20, "far": len(plan.impostor_cells) > 10,
+                    "band": plan.band_cell is not None and plan.band_sides.any()}[case]
+            if on:
+                assert (gpu.plant_records[:, 7] < 1.0).sum() > 0.05 * len(gpu.plant_records)
+        finally:
+            renderer.release()
+            app.renderer = None
+    np.testing.assert_array_equal(images[True], images[False])
+
+
 def test_a_new_sun_bakes_the_lod_cache_again(tmp_path):
     """A hot reload of the sun (or the sky) re-bakes the cached images, lit as the plants now are, and
     re-captures the band."""
