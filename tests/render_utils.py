@@ -53,6 +53,13 @@ def render_app(app, width: int = 160, height: int = 120, frames: int = 1, steps_
         app.renderer = None
 
 
+def world_pixel(view, point) -> tuple[int, int]:
+    """(row, column) of a world point in a view's image (row 0 at the top)."""
+    clip = view.view_proj.astype(np.float64) @ np.array([*point, 1.0])
+    ndc = clip[:3] / clip[3]
+    return int((1.0 - ndc[1]) * 0.5 * view.height), int((ndc[0] + 1.0) * 0.5 * view.width)
+
+
 def image_difference(a, b) -> tuple[float, int, np.ndarray]:
     """(mean absolute channel difference, max channel difference, per-pixel difference image)."""
     x = np.asarray(a.convert("RGB"), np.int16)

@@ -19,7 +19,8 @@ from engine.render.components import Hud, MeshConfig
 from engine.render.feature import OPAQUE, OVERLAY, SKY, ColorLayer, RenderFeature, View, write_view_color
 from engine.render.shadows import ShadowCasters, may_be_shadowed, read_shadow, receiver_uniforms
 from engine.render.terrain import TerrainChunks, build_terrain_chunks, draw_ranges, select_levels, shade_texels
-from engine.render.terrain_shadow import TerrainShadow, visibility
+from engine.render.terrain_shadow import TerrainShadow
+from engine.render.terrain_shadow import receiver as terrain_receiver
 from engine.spatial import Transform, cross, model_matrices
 
 if TYPE_CHECKING:
@@ -288,7 +289,7 @@ class TerrainFeature(RenderFeature):
                None if shadow is None else shadow.key)
         if key == mesh.shade_key:
             return
-        sun = None if shadow is None else visibility(terrain.field.heights, shadow.heights, shadow.penumbra)
+        sun = None if shadow is None else shadow.ground  # the sun's share on the ground (made with the map)
         texels = shade_texels(terrain.field, model, terrain.config.colors, r.sun_direction, r.sun_color, r.ambient,
                               s.sky_top, s.sky_horizon, sun)
         # 8 bits a channel (a software rasteriser filters them on its fast integer path, ~2x cheaper than half
@@ -610,12 +611,10 @@ class MeshFeature(RenderFeature):
             self.ctx.disable(moderngl.BLEND)
             lighting = lighting_uniforms(self.renderer, view)
             shadow_defines, shadow_uniforms = receiver_uniforms(shadow, pc)
-            defines = (("FOG",) if lighting["fog_density"] > 0.0 else ()) + shadow_defines
-            terrain = self.renderer.terrain_shadow_in(view)
-            if terrain is not None:
-                defines += ("TERRAIN_SHADOW",)
-                shadow_uniforms = {**shadow_uniforms, **terrain.uniforms(self.ctx)}
-            set_uniforms(self.renderer.load_program(SHADERS, "mesh", defines), **lighting, **shadow_uniforms)
+            terrain_defines, terrain_uniforms = terrain_receiver(self.renderer.terrain_shadow_in(view), self.ctx)
+            defines = (("FOG",) if lighting["fog_density"] > 0.0 else ()) + shadow_defines + terrain_defines
+            set_uniforms(self.renderer.load_program(SHADERS, "mesh", defines), **lighting, **shadow_uniforms,
+                         **terrain_uniforms)
             for shape, (inst, _) in data.items():
                 vao = self._vao(shape, len(inst), defines)
                 self._instances[shape].write(inst.tobytes())

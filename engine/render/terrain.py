@@ -188,6 +188,14 @@ def shade_texels(field, model: np.ndarray, colors, sun_dir, sun_color, ambient: 
     return out
 
 
+def texel_uv(field) -> tuple[tuple[float, float], tuple[float, float]]:
+    """(scale, offset): local (x, z) -> texture (u, v) = (x, z) · scale + offset for a texture with one texel per grid
+    point of ``field`` (a HeightField), texel centres on the grid points."""
+    rows, cols = field.heights.shape
+    scale = (1.0 / (field.spacing * cols), 1.0 / (field.spacing * rows))
+    return scale, (0.5 / cols - field.origin[0] * scale[0], 0.5 / rows - field.origin[1] * scale[1])
+
+
 def build_terrain_chunks(field, chunk: int = CHUNK) -> TerrainChunks:
     """Chunked, multi-level mesh of a :class:`~engine.heightfield.HeightField` (see the module docstring)."""
     h = np.asarray(field.heights, np.float64)
@@ -239,8 +247,7 @@ def build_terrain_chunks(field, chunk: int = CHUNK) -> TerrainChunks:
     box_min = np.array([[xs[c0], h[r0:r1 + 1, c0:c1 + 1].min(), zs[r0]] for r0, r1, c0, c1 in spans])
     box_max = np.array([[xs[c1], h[r0:r1 + 1, c0:c1 + 1].max(), zs[r1]] for r0, r1, c0, c1 in spans])
     error = np.maximum.accumulate(error, axis=0)  # a coarser level never counts as more exact
-    scale = (1.0 / (field.spacing * cols), 1.0 / (field.spacing * rows))
-    offset = (0.5 / cols - field.origin[0] * scale[0], 0.5 / rows - field.origin[1] * scale[1])
+    scale, offset = texel_uv(field)
     return TerrainChunks(vertices, np.concatenate(parts).astype(np.uint32), first, count, box_min, box_max,
                          error, float(field.spacing), scale, offset)
 

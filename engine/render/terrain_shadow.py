@@ -38,7 +38,11 @@ from typing import Any
 import moderngl
 import numpy as np
 
-__all__ = ["TERRAIN_SHADOW_UNIT", "TerrainShadow", "penumbra_height", "shadow_heights", "sun_in_local", "visibility"]
+from engine.heightfield import HeightField
+from engine.render.terrain import texel_uv
+
+__all__ = ["TERRAIN_SHADOW_UNIT", "TerrainShadow", "penumbra_height", "receiver", "shadow_heights", "sun_in_local",
+           "visibility"]
 
 TERRAIN_SHADOW_UNIT = 6  # the texture unit receivers bind the map to (the sun's shadow map takes 7, features 0-5)
 
@@ -143,10 +147,8 @@ class TerrainShadow:
     """One terrain's shadow-height map on the GPU and how receivers reach it (see the module docstring)."""
 
     key: tuple  # what it was made from: the field, its model matrix, the sun
-    heights: np.ndarray  # (rows, cols) float64 shadow heights (local units)
+    surface: HeightField  # the shadow heights S on the field's grid (local units), sampled as the field is
     ground: np.ndarray  # (rows, cols) float64 the sun's share on the ground itself (visibility at h)
-    spacing: float
-    origin: np.ndarray  # (x, z) of the grid's first point (local)
     world_to_local: np.ndarray  # 4 × 4 (column-vector convention)
     penumbra: float
     below_horizon: bool  # the sun is at or below the field's horizon: everything is in shadow
@@ -160,16 +162,14 @@ class TerrainShadow:
         below = bool(sun[1] <= 0.0)
         casts = below or bool((heights > field.heights).any())
         penumbra = penumbra_height(field.spacing, sun)
-        return cls(key, heights, visibility(field.heights, heights, penumbra), float(field.spacing),
-                   np.asarray(field.origin, np.float64).copy(), np.linalg.inv(np.asarray(model, np.float64)),
+        return cls(key, HeightField(heights, field.spacing, field.origin),
+                   visibility(field.heights, heights, penumbra), np.linalg.inv(np.asarray(model, np.float64)),
                    penumbra, below, casts)
 
     @property
-    def uv_transform(self) -> tuple[float, float, float, float]:
-        """local (x, z) -> texture (u, v): scale x, scale z, offset u, offset v (texel centres on grid points)."""
-        rows, cols = self.heights.shape
-        sx, sz = 1.0 / (self.spacing * cols), 1.0 / (self.spacing * rows)
-        return sx, sz, 0.5 / cols - self.origin[0] * sx, 0.5 / rows - self.origin[1] * sz
+    def heights(self) -> np.ndarray:
+        """(rows, cols) float64: the shadow heights."""
+        return self.surface.heights
 
     def upload(self, ctx: moderngl.Context) -> moderngl.Texture:
         """The map as an rg32f texture (made on first use: r the shadow heights, g the ground's share of the
@@ -190,24 +190,26 @@ class TerrainShadow:
     def uniforms(self, ctx: moderngl.Context, unit: int = TERRAIN_SHADOW_UNIT) -> dict[str, Any]:
         """Bind the map to texture ``unit`` and return the uniforms of terrain_shadow.glsl."""
         self.upload(ctx).use(unit)
+        scale, offset = texel_uv(self.surface)
         return dict(terrain_shadow=unit, terrain_shadow_matrix=self.world_to_local.T.astype(np.float32).copy(),
-                    terrain_shadow_uv=self.uv_transform,
+                    terrain_shadow_uv=(*scale, *offset),
                     terrain_shadow_params=(1.0 / self.penumbra, 0.0 if self.below_horizon else 1.0))
 
     def visibility(self, points: np.ndarray) -> np.ndarray:
         """(n,) the sun's share reaching world ``points`` (n, 3), as the shader computes it (bilinear S)."""
         p = np.asarray(points, np.float64).reshape(-1, 3)
         local = p @ self.world_to_local[:3, :3].T + self.world_to_local[:3, 3]
-        rows, cols = self.heights.shape
-        gx = (local[:, 0] - self.origin[0]) / self.spacing
-        gz = (local[:, 2] - self.origin[1]) / self.spacing
-        outside = (gx < -0.5) | (gz < -0.5) | (gx > cols - 0.5) | (gz > rows - 0.5)
-        gx, gz = np.clip(gx, 0.0, cols - 1), np.clip(gz, 0.0, rows - 1)
-        c0 = np.minimum(gx.astype(np.int64), cols - 2)
-        r0 = np.minimum(gz.astype(np.int64), rows - 2)
-        tx, tz = gx - c0, gz - r0
-        s = self.heights
-        top = s[r0, c0] + tx * (s[r0, c0 + 1] - s[r0, c0])
-        bottom = s[r0 + 1, c0] + tx * (s[r0 + 1, c0 + 1] - s[r0 + 1, c0])
-        vis = visibility(local[:, 1], top + tz * (bottom - top), self.penumbra)
+        s = self.surface
+        rows, cols = s.heights.shape
+        gx, gz = (local[:, 0] - s.origin[0]) / s.spacing, (local[:, 2] - s.origin[1]) / s.spacing
+        outside = (gx < -0.5) | (gz < -0.5) | (gx > cols - 0.5) | (gz > rows - 0.5)  # the texture's clamped margin
+        vis = visibility(local[:, 1], s.height_at(local[:, 0], local[:, 2]), self.penumbra)
         return np.where(outside, 0.0 if self.below_horizon else 1.0, vis)
+
+
+def receiver(shadow: TerrainShadow | None, ctx: moderngl.Context) -> tuple[tuple[str, ...], dict[str, Any]]:
+    """In a receiving pass's execute: the program defines (``TERRAIN_SHADOW``) and the uniforms of
+    terrain_shadow.glsl, the map bound; ``((), {})`` without a shadow (``Renderer.terrain_shadow_in(view)``)."""
+    if shadow is None:
+        return (), {}
+    return ("TERRAIN_SHADOW",), shadow.uniforms(ctx)

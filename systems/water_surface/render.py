@@ -16,6 +16,7 @@ import numpy as np
 from components.water_surface import WaterState, WaterSurface
 from engine.render.feature import TRANSPARENT, RenderFeature, View
 from engine.render.passes import lighting_uniforms, set_uniforms
+from engine.render.terrain_shadow import receiver as terrain_receiver
 from engine.spatial import Transform
 from systems.water_surface.kernels import vertex_records
 from systems.water_surface.mesh import retriangulate, wire_arrays
@@ -111,10 +112,11 @@ class WaterFeature(RenderFeature):
             self.ctx.enable(moderngl.DEPTH_TEST | moderngl.BLEND)
             self.ctx.disable(moderngl.CULL_FACE)
             self.ctx.blend_func = moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA
-            terrain = self.renderer.terrain_shadow_in(view)  # the hills' shadow (engine/render/terrain_shadow.py)
-            water = self.renderer.load_program(SHADERS, "water", ("TERRAIN_SHADOW",) if terrain is not None else ())
+            # the hills' shadow (engine/render/terrain_shadow.py)
+            terrain_defines, terrain_uniforms = terrain_receiver(self.renderer.terrain_shadow_in(view), self.ctx)
+            water = self.renderer.load_program(SHADERS, "water", terrain_defines)
             lights = lighting_uniforms(self.renderer, view)
-            set_uniforms(water, **lights, **({} if terrain is None else terrain.uniforms(self.ctx)))
+            set_uniforms(water, **lights, **terrain_uniforms)
             for item in data:
                 buf = self._upload(item)
                 if buf.vao is None or buf.vao.program is not water:  # new buffers, another variant, or F5

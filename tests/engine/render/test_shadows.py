@@ -10,6 +10,7 @@ from engine.render.feature import View
 from engine.render.shadows import fit_light, frustum_sphere, light_basis, may_be_shadowed
 from engine.spatial import Transform
 from tests.render_utils import make_renderer
+from tests.render_utils import world_pixel as _pixel
 
 SUN = (0.5, 1.0, 0.0)  # a box centred 2 m up throws its shadow centre 1 m towards -x
 
@@ -77,13 +78,6 @@ def _render(path: str, shadows: bool = True, size=(96, 96)):
     finally:
         renderer.release()
         app.renderer = None
-
-
-def _pixel(view: View, point) -> tuple[int, int]:
-    """(row, column) of a world point in the view's image (row 0 at the top)."""
-    clip = view.view_proj.astype(np.float64) @ np.array([*point, 1.0])
-    ndc = clip[:3] / clip[3]
-    return int((1.0 - ndc[1]) * 0.5 * view.height), int((ndc[0] + 1.0) * 0.5 * view.width)
 
 
 @pytest.mark.parametrize("ground", ["terrain", "plane"])

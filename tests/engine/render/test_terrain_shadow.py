@@ -10,6 +10,7 @@ from engine.builtin import Terrain, find_named
 from engine.heightfield import HeightField
 from engine.render.terrain_shadow import TerrainShadow, penumbra_height, shadow_heights, sun_in_local, visibility
 from tests.render_utils import make_renderer
+from tests.render_utils import world_pixel as _pixel
 
 
 def _unit(v) -> np.ndarray:
@@ -172,12 +173,6 @@ def _wall(app: App) -> None:
     h = np.zeros((33, 33))
     h[:, 22:25] = 4.0
     terrain.field = HeightField(h, 1.0, terrain.field.origin)
-
-
-def _pixel(view, point) -> tuple[int, int]:
-    clip = view.view_proj.astype(np.float64) @ np.array([*point, 1.0])
-    ndc = clip[:3] / clip[3]
-    return int((1.0 - ndc[1]) * 0.5 * view.height), int((ndc[0] + 1.0) * 0.5 * view.width)
 
 
 def _render(path: str, on: bool, frames: int = 1, size=(128, 128), setup=_wall):

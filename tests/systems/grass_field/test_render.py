@@ -326,11 +326,13 @@ def test_the_terrains_shadow_falls_on_the_grass(tmp_path, far):
         """The x where each pixel's ray meets the ground (y = 0)."""
         inverse = np.linalg.inv(view.view_proj.astype(np.float64))
         rows, cols = np.mgrid[0:view.height, 0:view.width]
-        ndc = np.stack([(cols + 0.5) / view.width * 2 - 1, 1 - (rows + 0.5) / view.height * 2,
-                        np.full(rows.shape, -1.0), np.ones(rows.shape)], axis=-1) @ inverse.T
-        far_points = np.stack([ndc[..., 0] * 0 + (cols + 0.5) / view.width * 2 - 1, 1 - (rows + 0.5) / view.height * 2,
-                               np.ones(rows.shape), np.ones(rows.shape)], axis=-1) @ inverse.T
-        near, far_ = ndc[..., :3] / ndc[..., 3:], far_points[..., :3] / far_points[..., 3:]
+        ndc_x, ndc_y = (cols + 0.5) / view.width * 2 - 1, 1 - (rows + 0.5) / view.height * 2
+
+        def unproject(depth: float) -> np.ndarray:
+            h = np.stack([ndc_x, ndc_y, np.full(rows.shape, depth), np.ones(rows.shape)], axis=-1) @ inverse.T
+            return h[..., :3] / h[..., 3:]
+
+        near, far_ = unproject(-1.0), unproject(1.0)
         t = near[..., 1] / (near[..., 1] - far_[..., 1])
         return near[..., 0] + t * (far_[..., 0] - near[..., 0])
 
