@@ -60,6 +60,21 @@ def world_pixel(view, point) -> tuple[int, int]:
     return int((1.0 - ndc[1]) * 0.5 * view.height), int((ndc[0] + 1.0) * 0.5 * view.width)
 
 
+def ground_of_pixels(view, y: float = 0.0) -> np.ndarray:
+    """(height, width, 3) where each pixel's ray through a view meets the plane at height ``y``."""
+    inverse = np.linalg.inv(view.view_proj.astype(np.float64))
+    rows, cols = np.mgrid[0:view.height, 0:view.width]
+    ndc_x, ndc_y = (cols + 0.5) / view.width * 2 - 1, 1 - (rows + 0.5) / view.height * 2
+
+    def unproject(depth: float) -> np.ndarray:
+        h = np.stack([ndc_x, ndc_y, np.full(rows.shape, depth), np.ones(rows.shape)], axis=-1) @ inverse.T
+        return h[..., :3] / h[..., 3:]
+
+    near, far = unproject(-1.0), unproject(1.0)
+    t = (near[..., 1] - y) / (near[..., 1] - far[..., 1])
+    return near + t[..., None] * (far - near)
+
+
 def image_difference(a, b) -> tuple[float, int, np.ndarray]:
     """(mean absolute channel difference, max channel difference, per-pixel difference image)."""
     x = np.asarray(a.convert("RGB"), np.int16)

@@ -30,10 +30,10 @@ from systems.grass_field.lod import N_BAND_SIDES, N_VIEWS
 
 __all__ = ["impostor_basis", "TileFrame", "tile_frame", "tile_pixels", "tile_bounds", "AtlasLayout", "atlas_layout",
            "look_at", "perspective", "orthographic", "frustum", "bake_view_proj", "band_side_frame",
-           "band_view_proj", "coverage_mipmaps", "cache_key", "DiskCache", "Progress", "CACHE_FORMAT"]
+           "band_view_proj", "bake_depth_range", "coverage_mipmaps", "cache_key", "DiskCache", "Progress", "CACHE_FORMAT"]
 
 log = logging.getLogger("grass_field")
-CACHE_FORMAT = 2  # 2: level-3 shading with the specular power as squarings (plant.frag)
+CACHE_FORMAT = 3  # 2: level-3 shading with the specular power as squarings (plant.frag); 3: with the depth image
 ATLAS_PAD = 4  # texels around each tile (mip levels up to 2 stay inside their tile)
 ATLAS_MIP_LEVELS = 3
 
@@ -160,14 +160,19 @@ def tile_bounds(image: np.ndarray, layout: AtlasLayout, margin: int = 2 ** ATLAS
     return out
 
 
-def bake_view_proj(view: int, frame: TileFrame) -> np.ndarray:
-    """World→clip of cached view ``view`` (azimuth view·30°) of a cell centred at the origin (ground y = 0)."""
-    right, up, normal = impostor_basis(view * 2.0 * np.pi / N_VIEWS, frame.elevation)
+def bake_depth_range(frame: TileFrame) -> tuple[float, float, float]:
+    """(distance of the cached views' camera from the cell's centre, its near and far planes)."""
     distance = 2.0 * frame.depth + 1.0
-    eye = normal * distance
-    v = _camera(eye, right, up, normal)
-    p = orthographic(-frame.half_width, frame.half_width, frame.bottom, frame.top, 0.5,
-                     distance + frame.depth + 1.0)
+    return distance, 0.5, distance + frame.depth + 1.0
+
+
+def bake_view_proj(view: int, frame: TileFrame) -> np.ndarray:
+    """World→clip of cached view ``view`` (azimuth view·30°) of a cell centred at the origin (ground y = 0):
+    orthographic, from ``normal · distance`` looking down ``-normal`` (:func:`bake_depth_range`)."""
+    right, up, normal = impostor_basis(view * 2.0 * np.pi / N_VIEWS, frame.elevation)
+    distance, near, far = bake_depth_range(frame)
+    v = _camera(normal * distance, right, up, normal)
+    p = orthographic(-frame.half_width, frame.half_width, frame.bottom, frame.top, near, far)
     return p @ v
 
 
@@ -297,26 +302,35 @@ class DiskCache:
     def path(self, key: str) -> Path:
         return self.directory / f"grass_field_{key[:40]}.npz"
 
-    def load(self, key: str, shape: tuple[int, int, int]) -> np.ndarray | None:
+    def load(self, key: str, shape: tuple[int, int, int],
+             depth_shape: tuple[int, int, int] | None = None) -> tuple[np.ndarray, np.ndarray | None] | None:
+        """(the colour atlas, uint8 ``shape``; its depth image, float16 ``depth_shape``, or None when not asked
+        for), or None when the file is missing, unreadable or holds other shapes."""
         path = self.path(key)
         if not path.is_file():
             return None
         try:
             with np.load(path) as data:
                 atlas = data["atlas"]
+                depth = data["depth"] if depth_shape is not None and "depth" in data.files else None
                 stored = str(data["key"])
         except (OSError, ValueError, KeyError) as exc:
             log.warning("grass_field: ignoring unreadable cache %s (%s)", path, exc)
             return None
         if stored != key or atlas.shape != shape or atlas.dtype != np.uint8:
             return None
-        return atlas
+        if depth_shape is not None and (depth is None or depth.shape != depth_shape or depth.dtype != np.float16):
+            return None  # stored without it (an older format) or for another layout: bake again
+        return atlas, depth
 
-    def store(self, key: str, atlas: np.ndarray) -> Path:
+    def store(self, key: str, atlas: np.ndarray, depth: np.ndarray | None = None) -> Path:
         self.directory.mkdir(parents=True, exist_ok=True)
         path = self.path(key)
         tmp = path.with_suffix(f".tmp{os.getpid()}.npz")
-        np.savez_compressed(tmp, atlas=atlas, key=np.array(key))
+        arrays = dict(atlas=atlas, key=np.array(key))
+        if depth is not None:
+            arrays["depth"] = depth
+        np.savez_compressed(tmp, **arrays)
         os.replace(tmp, path)
         return path
 

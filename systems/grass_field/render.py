@@ -38,7 +38,8 @@ from engine.spatial import Transform
 from systems.grass_field.frame import FramePlan, band_apothem, band_sector_content, plan_frame
 from systems.grass_field.geometry import DRAW_GROUPS, LEVELS, CompactMesh, compact_mesh
 from systems.grass_field.impostor import (ATLAS_MIP_LEVELS, AtlasLayout, DiskCache, Progress, atlas_layout,
-                                          band_side_frame, band_view_proj, bake_view_proj, cache_key,
+                                          bake_depth_range, band_side_frame, band_view_proj, bake_view_proj,
+                                          cache_key,
                                           coverage_mipmaps, impostor_basis, tile_bounds, tile_frame, tile_pixels)
 from systems.grass_field.lod import (N_BAND_SIDES, N_VIEWS, CameraInput, ImpostorOrientation, band_distance,
                                      camera_from_view)
@@ -169,11 +170,16 @@ class FieldGpu:
         max_size = int(ctx.info.get("GL_MAX_TEXTURE_SIZE", 8192))
         self.layout: AtlasLayout = atlas_layout(cfg.cell_variants * N_VIEWS, tw, th, min(max_size, MAX_ATLAS_SIDE))
         self.atlas: moderngl.Texture | None = None
+        # beside it, the depth of each texel's grass in its cached view (plant.frag's ATLAS_DEPTH: window depth ·
+        # coverage, coverage; rg16f, mip levels box-filtered): where the sun's shadow map is looked up
+        self.atlas_depth: moderngl.Texture | None = None
         self.bounds_tex: moderngl.Texture | None = None
         self.baked_views = 0  # cached views rendered (each view of each layout once, unless loaded from disk)
         self.loaded_from_disk = False
         self.disk_path: Path | None = None
         self.impostor_buf = ctx.buffer(reserve=self.cell_capacity * IMPOSTOR_FLOATS * 4)
+        self.impostor_shadowed_buf = ctx.buffer(reserve=self.cell_capacity * IMPOSTOR_FLOATS * 4)
+        self.shadowed_rectangles = 0  # level-4 rectangles of the last draw() drawn with the sun shadow look-up
         # level 5: the band
         self.band_entries: OrderedDict[tuple[int, int], _BandEntry] = OrderedDict()
         self.band_layout: AtlasLayout | None = None
@@ -197,18 +203,19 @@ class FieldGpu:
     # ------------------------------------------------------------------------------ programs, arrays
     def _program(self, name: str, *, debug: bool = False, fog: bool = False,
                  band_distance: bool = False, terrain_shadow: bool = False,
-                 shadows: tuple[str, ...] = ()) -> moderngl.Program:
+                 shadows: tuple[str, ...] = (), atlas_depth: bool = False) -> moderngl.Program:
         """``name.vert`` + ``name.frag`` compiled with the defines DEBUG_LEVELS (the debug view), FOG (the view
         has fog), BAND_DISTANCE (the band's capture: the level-4 rectangles also write their distance from the
-        eye), TERRAIN_SHADOW (the level-4 rectangles read the terrain's shadow), ``shadows`` (the plants read the
-        sun's shadow map: engine/render/shadows.py's defines) and, for the level-4 rectangles, BLEND_VIEWS
+        eye), TERRAIN_SHADOW (the level-4 rectangles read the terrain's shadow), ``shadows`` (the plants and the
+        level-4 rectangles read the sun's shadow map: engine/render/shadows.py's defines), ATLAS_DEPTH (the LOD
+        cache's bake also writes each texel's depth) and, for the level-4 rectangles, BLEND_VIEWS
         (``blend_views``); shared through the renderer."""
-        key = (name, debug, fog, band_distance, terrain_shadow, shadows)
+        key = (name, debug, fog, band_distance, terrain_shadow, shadows, atlas_depth)
         prog = self._programs.get(key)
         if prog is not None:
             return prog
         defines = tuple(d for d, on in (("DEBUG_LEVELS", debug), ("FOG", fog), ("BAND_DISTANCE", band_distance),
-                                        ("TERRAIN_SHADOW", terrain_shadow),
+                                        ("TERRAIN_SHADOW", terrain_shadow), ("ATLAS_DEPTH", atlas_depth),
                                         ("BLEND_VIEWS", name == "impostor" and self.cfg.blend_views)) if on)
         defines += shadows
         try:
@@ -220,8 +227,8 @@ class FieldGpu:
         return prog
 
     def _vao(self, prog: moderngl.Program, what: tuple) -> moderngl.VertexArray:
-        """The vertex array of ``what`` (("mesh", level, records buffer), ("impostor",) or ("band",)) for
-        ``prog``."""
+        """The vertex array of ``what`` (("mesh", level, records buffer), ("impostor", instance buffer) or
+        ("band",)) for ``prog``."""
         key = (prog.glo, *(x.glo if isinstance(x, moderngl.Buffer) else x for x in what))
         vao = self._vaos.get(key)
         if vao is None:
@@ -231,7 +238,7 @@ class FieldGpu:
                                                    (records, "4f 4f /i", "i_p0", "i_p1")],
                                             index_buffer=self.mesh_ibo[level], index_element_size=4)
             elif what[0] == "impostor":  # i_level feeds only the debug view: absent from the other variants
-                vao = self.ctx.vertex_array(prog, [(self.impostor_buf, "3f 1f 2f 1f 1f /i", "i_centre", "i_face",
+                vao = self.ctx.vertex_array(prog, [(what[1], "3f 1f 2f 1f 1f /i", "i_centre", "i_face",
                                                     "i_tiles", "i_blend", "i_level")], skip_errors=True)
             else:
                 vao = self.ctx.vertex_array(prog, [(self.band_buf, "3f 2f", "in_position", "in_uv")])
@@ -286,20 +293,27 @@ class FieldGpu:
         return commands if receives is not None else commands[0]
 
     def _receivers(self, shadow, listed: np.ndarray) -> np.ndarray | None:
-        """Which listed plants a sun shadow of this frame may reach (None without a shadow map): per cell, by
-        its box (the cell's plants with their reach and height) against the casters' (receiver culling)."""
+        """Which listed plants a sun shadow of this frame may reach (None without a shadow map or where it
+        reaches none): per cell, by its box (the cell's plants with their reach and height) against the casters'
+        (receiver culling)."""
         if shadow is None or not len(listed):
             return None
+        cell_of = listed // self.data.placed.plants_per_cell
+        cells = np.unique(cell_of)
+        reached = np.zeros(self.data.placed.cell_count, bool)
+        reached[cells] = self._cells_reached(shadow, cells)
+        return reached[cell_of] if reached.any() else None
+
+    def _cells_reached(self, shadow, cells: np.ndarray) -> np.ndarray:
+        """(len(cells),) whether a caster's shadow may reach each cell's box (its plants with their reach and
+        height; a level-4 rectangle stands for the same grass)."""
         placed, data = self.data.placed, self.data
-        cells = np.unique(listed // placed.plants_per_cell)
         centre = placed.cell_centre[cells]
         lo = np.column_stack([centre[:, 0] - data.cell_radius, placed.cell_ground[cells, 0],
                               centre[:, 2] - data.cell_radius])
         hi = np.column_stack([centre[:, 0] + data.cell_radius, placed.cell_ground[cells, 1] + data.plant_height,
                               centre[:, 2] + data.cell_radius])
-        reached = np.zeros(placed.cell_count, bool)
-        reached[cells] = may_be_shadowed(shadow, np.stack([lo, hi], axis=1))
-        return reached[listed // placed.plants_per_cell] if reached.any() else None
+        return may_be_shadowed(shadow, np.stack([lo, hi], axis=1))
 
     def _draw_plants(self, prog: moderngl.Program, records: moderngl.Buffer, commands: np.ndarray,
                      levels: range | list[int], set_level=None, command_set: int | None = None) -> None:
@@ -366,31 +380,39 @@ class FieldGpu:
         w, h = self.layout.size
         key = cache_key(self.cfg, self.state, self._cache_extra())
         disk = DiskCache(self.cfg.cache_dir) if self.cfg.disk_cache else None
-        image = disk.load(key, (h, w, 4)) if disk is not None else None
+        found = disk.load(key, (h, w, 4), (h, w, 2)) if disk is not None else None
         self.atlas = self.ctx.texture((w, h), 4)
-        if image is not None:
+        self.atlas_depth = self.ctx.texture((w, h), 2, dtype="f2")
+        if found is not None:
+            image, depth = found
             self.loaded_from_disk = True
             self.disk_path = disk.path(key)
             self.atlas.write(np.ascontiguousarray(image).tobytes())
+            self.atlas_depth.write(np.ascontiguousarray(depth).tobytes())
         else:
-            image = self._bake_atlas()
+            image, depth = self._bake_atlas()
             if disk is not None:
-                self.disk_path = disk.store(key, image)
+                self.disk_path = disk.store(key, image, depth)
         self.bounds_tex = _data_texture(self.ctx, tile_bounds(image, self.layout))
         self.atlas.build_mipmaps(0, ATLAS_MIP_LEVELS)
         for level, mip in enumerate(coverage_mipmaps(image, ATLAS_MIP_LEVELS), start=1):
             self.atlas.write(np.ascontiguousarray(mip).tobytes(), level=level)
+        # the depth's levels: plain box filters of (depth · coverage, coverage), so their ratio is the covered
+        # texels' mean depth wherever the colour's coverage-scaled alpha passes
+        self.atlas_depth.build_mipmaps(0, ATLAS_MIP_LEVELS)
         # bilinear within the nearest mip level: trilinear filtering fetches twice the texels of an alpha-tested
         # image for a blend the coverage-preserving levels barely need (-25 % of the level-4 pass on llvmpipe)
-        self.atlas.filter = (moderngl.LINEAR_MIPMAP_NEAREST, moderngl.LINEAR)
-        self.atlas.repeat_x = self.atlas.repeat_y = False
+        for tex in (self.atlas, self.atlas_depth):
+            tex.filter = (moderngl.LINEAR_MIPMAP_NEAREST, moderngl.LINEAR)
+            tex.repeat_x = tex.repeat_y = False
 
-    def _bake_atlas(self) -> np.ndarray:
-        """Render level-3 grass of each layout at 12 views (every 30°) with a transparent background."""
+    def _bake_atlas(self) -> tuple[np.ndarray, np.ndarray]:
+        """Render level-3 grass of each layout at 12 views (every 30°) with a transparent background; (the
+        colour atlas, rgba8; its depth image, float16 (window depth, 1) where grass is drawn)."""
         ctx, cfg, state = self.ctx, self.cfg, self.state
         w, h = self.layout.size
         depth = ctx.depth_renderbuffer((w, h))
-        fbo = ctx.framebuffer(color_attachments=[self.atlas], depth_attachment=depth)
+        fbo = ctx.framebuffer(color_attachments=[self.atlas, self.atlas_depth], depth_attachment=depth)
         layouts = cfg.cell_variants
         n = cfg.plants_per_cell
         offsets = state.layout_offset.reshape(-1, 2)
@@ -404,7 +426,7 @@ class FieldGpu:
             fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
             ctx.enable(moderngl.DEPTH_TEST)
             ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
-            prog = self.plant_prog
+            prog = self._program("plant", atlas_depth=True)
             set_uniforms(prog, **self._lighting(None), **self._plant_uniforms())
             progress = Progress("grass_field: baking the LOD cache", layouts * N_VIEWS)
             for k in range(layouts):
@@ -421,12 +443,13 @@ class FieldGpu:
                     self.baked_views += 1
                 progress.update((k + 1) * N_VIEWS)
             fbo.scissor = None
-            raw = self.atlas.read()
+            raw, raw_depth = self.atlas.read(), self.atlas_depth.read()
         finally:
             fbo.release()
             depth.release()
             plants.release()
-        return np.frombuffer(raw, np.uint8).reshape(h, w, 4).copy()
+        return (np.frombuffer(raw, np.uint8).reshape(h, w, 4).copy(),
+                np.frombuffer(raw_depth, np.float16).reshape(h, w, 2).copy())
 
     def _impostor_uniforms(self, view_proj: np.ndarray, eye: np.ndarray, ortho: bool) -> dict[str, Any]:
         f, lay = self.frame, self.layout
@@ -436,7 +459,8 @@ class FieldGpu:
                     atlas_size=tuple(float(x) for x in lay.size), atlas_tex=0, bounds_tex=1)
 
     def _impostor_instances(self, cells: np.ndarray, face: np.ndarray, views: np.ndarray, blend: np.ndarray,
-                            level: int) -> int:
+                            level: int, buffer: moderngl.Buffer | None = None) -> int:
+        """Write the rectangles of ``cells`` into ``buffer`` (the impostor buffer by default); how many."""
         data = np.zeros((len(cells), IMPOSTOR_FLOATS), np.float32)
         if len(cells):
             data[:, 0:3] = self.data.placed.cell_centre[cells]
@@ -444,7 +468,7 @@ class FieldGpu:
             data[:, 4:6] = self.data.cell_variant[cells, None] * N_VIEWS + views
             data[:, 6] = blend
             data[:, 7] = level
-            self.impostor_buf.write(data.tobytes())
+            (self.impostor_buf if buffer is None else buffer).write(data.tobytes())
         return len(cells)
 
     # ------------------------------------------------------------------------------------ level 5 (band)
@@ -590,8 +614,9 @@ class FieldGpu:
         self.ctx.enable(moderngl.DEPTH_TEST)
         self.ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
         prog = self._program("impostor", band_distance=True, terrain_shadow=terrain is not None)
-        set_uniforms(prog, **self._lighting(None), **self._terrain_uniforms(terrain))
-        vao = self._vao(prog, ("impostor",))
+        set_uniforms(prog, **self._lighting(None), **self._terrain_uniforms(terrain),
+                     **self._shade_uniforms(terrain, False))
+        vao = self._vao(prog, ("impostor", self.impostor_buf))
         self.atlas.use(0)
         self.bounds_tex.use(1)
         for side in range(N_BAND_SIDES):
@@ -637,15 +662,23 @@ class FieldGpu:
 
     # ---------------------------------------------------------------------------------------- drawing
     def _terrain_uniforms(self, terrain: TerrainShadow | None) -> dict[str, Any]:
-        """terrain_shadow.glsl's uniforms for ``terrain`` and the level-4 images' shaded colour factor
-        (impostor.frag), or nothing without one."""
-        if terrain is None:
+        """terrain_shadow.glsl's uniforms for ``terrain``, or nothing without one."""
+        return {} if terrain is None else terrain.uniforms(self.ctx)
+
+    def _shade_uniforms(self, terrain: TerrainShadow | None, receiving: bool) -> dict[str, Any]:
+        """impostor.frag's shaded colour factor (where the terrain or the sun's shadow map hides the sun) and
+        the unit of the atlas's depth image (the shadow map's look-up point), or nothing when neither applies."""
+        if terrain is None and not receiving:
             return {}
         r = self.renderer
         sky = np.asarray(r.settings.sky_top, np.float64) * r.ambient  # lit.glsl's hemisphere light, upwards
         sun = np.asarray(r.sun_color, np.float64) * max(float(r.sun_direction[1]), 0.0)
         shade = sky / np.maximum(sun + sky, 1e-6)
-        return {**terrain.uniforms(self.ctx), "terrain_shade": tuple(float(x) for x in shade)}
+        out = {"shade_factor": tuple(float(x) for x in shade)}
+        if receiving:
+            distance, near, far = bake_depth_range(self.frame)
+            out.update(atlas_depth=2, bake_depth=(distance, far - near))
+        return out
 
     def sync_lighting(self) -> None:
         """Follow the renderer's light and the terrain's shadow: a new sun or sky (a hot reload) re-bakes the
@@ -656,9 +689,9 @@ class FieldGpu:
         light = self._cache_extra()
         light = (light["sun_dir"], light["sun_color"], light["ambient"], light["sky"])
         if self._light_key is not None and light != self._light_key and self.atlas is not None:
-            for obj in (self.atlas, self.bounds_tex):
+            for obj in (self.atlas, self.atlas_depth, self.bounds_tex):
                 obj.release()
-            self.atlas = self.bounds_tex = None
+            self.atlas = self.atlas_depth = self.bounds_tex = None
             self.band_entries.clear()
         terrain = r.terrain_shadow
         terrain_key = None if terrain is None else terrain.key
@@ -683,7 +716,8 @@ class FieldGpu:
              debug: bool, viewer=None, shadow: tuple | None = None) -> None:
         """Draw the plan into ``fbo`` (the view's colour + depth): a handful of instanced draw calls.
         ``shadow``: (the view's sun shadow map, receiver_uniforms' defines and uniforms) when it has one: the
-        plants (levels 0-3) a caster's shadow may reach are drawn apart with the look-up."""
+        plants (levels 0-3) and the level-4 rectangles a caster's shadow may reach are drawn apart with the
+        look-up (per vertex for the plants, per pixel at the depth the atlas holds for the rectangles)."""
         ctx = self.ctx
         self.draw_calls = 0
         fbo.use()
@@ -692,9 +726,16 @@ class FieldGpu:
         lighting = self._lighting(view)
         fog = lighting["fog_density"] > 0.0
         terrain = self.renderer.terrain_shadow_in(view)
-        # uploads first: writing a buffer that the frame's pending draws use would make the driver wait
-        rectangles = self._impostor_instances(plan.impostor_cells, plan.impostor_face, plan.impostor_views,
-                                              plan.impostor_blend, 4)
+        # uploads first: writing a buffer that the frame's pending draws use would make the driver wait.  Level 4:
+        # the rectangles a caster's shadow may reach are drawn apart, with the shadow map looked up per pixel
+        shadowed = np.zeros(len(plan.impostor_cells), bool)
+        if shadow is not None and len(plan.impostor_cells):
+            shadowed = self._cells_reached(shadow[0], plan.impostor_cells)
+        groups = [~shadowed, shadowed] if shadowed.any() else [slice(None)]
+        rectangles = [self._impostor_instances(plan.impostor_cells[g], plan.impostor_face[g],
+                                               plan.impostor_views[g], plan.impostor_blend[g], 4, buf)
+                      for g, buf in zip(groups, (self.impostor_buf, self.impostor_shadowed_buf))]
+        self.shadowed_rectangles = rectangles[1] if len(rectangles) > 1 else 0
         band_vertices, band = 0, None
         if plan.band_cell is not None and plan.band_sides.any():
             band = self.band_entries[self._band_key(plan.band_cell, camera, viewer, plan.band_apothem,
@@ -727,14 +768,20 @@ class FieldGpu:
 
                 self._draw_plants(prog, self.instance_buf, commands, range(LEVELS), set_level if debug else None,
                                   command_set)
-        # level 4 (the plan lists the rectangles nearest first)
-        if rectangles:
-            prog = self._program("impostor", debug=debug, fog=fog, terrain_shadow=terrain is not None)
+        # level 4 (the plan lists the rectangles nearest first; each group keeps that order)
+        for count, buf, receiving in zip(rectangles, (self.impostor_buf, self.impostor_shadowed_buf), (False, True)):
+            if not count:
+                continue
+            prog = self._program("impostor", debug=debug, fog=fog, terrain_shadow=terrain is not None,
+                                 shadows=shadow[1] if receiving else ())
             set_uniforms(prog, **{**lighting, **self._impostor_uniforms(view.view_proj, view.camera_pos, view.ortho),
-                                  **self._terrain_uniforms(terrain)})
+                                  **self._terrain_uniforms(terrain), **self._shade_uniforms(terrain, receiving),
+                                  **(shadow[2] if receiving else {})})
             self.atlas.use(0)
             self.bounds_tex.use(1)
-            self._vao(prog, ("impostor",)).render(moderngl.TRIANGLE_STRIP, vertices=4, instances=rectangles)
+            if receiving:
+                self.atlas_depth.use(2)
+            self._vao(prog, ("impostor", buf)).render(moderngl.TRIANGLE_STRIP, vertices=4, instances=count)
             self.draw_calls += 1
         # level 5
         if band_vertices:
@@ -749,7 +796,8 @@ class FieldGpu:
         if self._released:
             return
         self._released = True
-        objects = [self.instance_buf, self.command_buf, self.impostor_buf, self.bounds_tex, self.band_buf, self.atlas,
+        objects = [self.instance_buf, self.command_buf, self.impostor_buf, self.impostor_shadowed_buf,
+                   self.bounds_tex, self.band_buf, self.atlas, self.atlas_depth,
                    self.band_tex, self.band_distance, self.band_fbo, self.band_depth]
         objects += list(self._vaos.values())  # the programs belong to the renderer (shared between fields)
         objects += list(self.mesh_vbo.values()) + list(self.mesh_ibo.values())

@@ -1,11 +1,14 @@
 #version 330
 #include "lit.glsl"
 #include "common.glsl"
+#include "shadow.glsl"
 // Cached images are premultiplied (transparent background); alpha-tested with coverage-preserving mipmaps.
 // Variants (render.py): BLEND_VIEWS (cross-fade the two nearest views), DEBUG_LEVELS, FOG, BAND_DISTANCE (the
 // band's capture: each texel's distance from the capturing eye into a second target, for band.frag's fog),
 // TERRAIN_SHADOW (the terrain hides the sun from part of the field: the image, lit by the whole sun, is scaled
-// towards its shaded colour; the band's capture keeps it, so the band needs nothing more).
+// towards its shaded colour; the band's capture keeps it, so the band needs nothing more), SHADOWS (the sun's
+// shadow map, per pixel where the texel's grass stands: the atlas's second image holds its depth in the cached
+// view; only the cells a caster's shadow may reach take it).
 uniform sampler2D atlas_tex;
 in vec2 v_uv_a;
 in vec2 v_uv_b;
@@ -15,9 +18,16 @@ flat in int v_level;
 out vec4 frag;
 #ifdef TERRAIN_SHADOW
 in float v_sun;
+#endif
+#ifdef SHADOWS
+uniform sampler2D atlas_depth;  // (window depth · coverage, coverage) of the cached views, mip levels box-filtered
+in vec3 v_grass;
+flat in vec3 v_depth_dir;
+#endif
+#if defined(TERRAIN_SHADOW) || defined(SHADOWS)
 // the cached images hold level-3 grass (dots, lit with an upward normal and no specular: plant.vert), so the
-// shaded colour is the lit one times sky / (sun · sun_dir.y + sky) per channel (FieldGpu._terrain_uniforms)
-uniform vec3 terrain_shade;
+// shaded colour is the lit one times sky / (sun · sun_dir.y + sky) per channel (FieldGpu._shade_uniforms)
+uniform vec3 shade_factor;
 #endif
 #ifdef BAND_DISTANCE
 uniform vec3 eye;
@@ -31,8 +41,16 @@ void main() {
 #endif
     if (c.a < 0.5) discard;
     vec3 col = c.rgb / c.a;
+#if defined(TERRAIN_SHADOW) || defined(SHADOWS)
+    float sun = 1.0;
 #ifdef TERRAIN_SHADOW
-    col *= mix(terrain_shade, vec3(1.0), v_sun);
+    sun = v_sun;
+#endif
+#ifdef SHADOWS
+    vec2 depth = texture(atlas_depth, v_uv_a).rg;
+    sun *= sun_visibility(shadow_coord(v_grass + (depth.r / max(depth.g, 1e-4)) * v_depth_dir, vec3(0.0, 1.0, 0.0)));
+#endif
+    col *= mix(shade_factor, vec3(1.0), sun);
 #endif
 #ifdef DEBUG_LEVELS
     col = debug_tint(col, v_level);

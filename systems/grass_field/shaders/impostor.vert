@@ -2,6 +2,7 @@
 #include "lit.glsl"
 #include "common.glsl"
 #include "terrain_shadow.glsl"
+#include "shadow.glsl"
 // Level 4: one textured rectangle per cell, instanced. The rectangle faces azimuth i_face (turned by the 15°
 // rule on the CPU) and shows cached view i_tiles.x (i_tiles.y is cross-faded in with weight i_blend when the
 // blending option is on). It is drawn scaled about the eye so it sits in front of the cell's content while
@@ -31,6 +32,14 @@ out vec3 v_world;       // the rectangle's point where the cell stands (before t
 out float v_sun;        // the share of the sun the terrain leaves on the ground there (per corner, interpolated;
                         // the ground's, as the plants of levels 0-3 take it at their foot)
 #endif
+#ifdef SHADOWS
+// The sun's shadow map per pixel (impostor.frag): where the texel's grass stands is the point of the cached view's
+// orthographic camera at the texel's window depth, in the rectangle's frame (the view turned to face as the
+// rectangle is, so the shade lands on what is drawn): v_grass + depth · v_depth_dir.
+uniform vec2 bake_depth;  // the cached views' camera: its distance from the cell's centre, far - near
+out vec3 v_grass;         // the point at window depth 0 (the near plane)
+flat out vec3 v_depth_dir;
+#endif
 vec2 tile_uv(float tile, vec2 local) {
     int t = int(tile + 0.5);
     int cols = int(atlas.x + 0.5);
@@ -48,6 +57,11 @@ void main() {
     vec3 right, up, normal;
     impostor_basis(i_face, elevation, right, up, normal);
     vec3 world = i_centre + ((corner.x * 2.0 - 1.0) * frame.x) * right + mix(frame.y, frame.z, corner.y) * up;
+#ifdef SHADOWS
+    // impostor.bake_view_proj: an orthographic camera at normal · (2 depth + 1) looking down -normal, near 0.5
+    v_grass = world + normal * (bake_depth.x - 0.5);
+    v_depth_dir = -normal * bake_depth.y;
+#endif
     v_fog = clamp(1.0 - exp(-length(camera_pos - world) * fog_density), 0.0, 1.0);
 #ifdef BAND_DISTANCE
     v_world = world;

@@ -45,8 +45,15 @@ def test_disk_cache_round_trip(tmp_path):
     assert cache.load("k" * 64, atlas.shape) is None
     path = cache.store("k" * 64, atlas)
     assert path.is_file()
-    assert np.array_equal(cache.load("k" * 64, atlas.shape), atlas)
+    loaded, depth = cache.load("k" * 64, atlas.shape)
+    assert np.array_equal(loaded, atlas) and depth is None
     assert cache.load("k" * 64, (8, 8, 4)) is None  # another layout: rebake
+    assert cache.load("k" * 64, atlas.shape, (8, 16, 2)) is None  # no depth image stored: rebake
+    depth = np.random.default_rng(1).random((8, 16, 2)).astype(np.float16)
+    cache.store("k" * 64, atlas, depth)
+    loaded, loaded_depth = cache.load("k" * 64, atlas.shape, depth.shape)
+    assert np.array_equal(loaded, atlas) and np.array_equal(loaded_depth, depth)
+    assert cache.load("k" * 64, atlas.shape, (8, 8, 2)) is None
     path.write_bytes(b"not a zip")
     assert cache.load("k" * 64, atlas.shape) is None  # unreadable: ignored, rebaked
 

@@ -8,7 +8,7 @@ import pytest
 
 from components.grass_field import GrassFieldState
 from engine.app import App
-from tests.render_utils import assert_golden, make_renderer, render_app, respawn
+from tests.render_utils import assert_golden, ground_of_pixels, make_renderer, render_app, respawn
 from tests.systems.grass_field.helpers import scene_text, write_scene
 
 SMALL = 'preset = "grass_field/paper"\nplants_per_cell = 16\ncell_variants = 3\nplant_variants = 4\n'
@@ -322,21 +322,7 @@ def test_the_terrains_shadow_falls_on_the_grass(tmp_path, far):
             app.renderer = None
     grass_pixels = np.abs(images[False, False] - images[False, True]).sum(axis=-1) > 20.0
 
-    def x_of_pixels() -> np.ndarray:
-        """The x where each pixel's ray meets the ground (y = 0)."""
-        inverse = np.linalg.inv(view.view_proj.astype(np.float64))
-        rows, cols = np.mgrid[0:view.height, 0:view.width]
-        ndc_x, ndc_y = (cols + 0.5) / view.width * 2 - 1, 1 - (rows + 0.5) / view.height * 2
-
-        def unproject(depth: float) -> np.ndarray:
-            h = np.stack([ndc_x, ndc_y, np.full(rows.shape, depth), np.ones(rows.shape)], axis=-1) @ inverse.T
-            return h[..., :3] / h[..., 3:]
-
-        near, far_ = unproject(-1.0), unproject(1.0)
-        t = near[..., 1] / (near[..., 1] - far_[..., 1])
-        return near[..., 0] + t * (far_[..., 0] - near[..., 0])
-
-    x = x_of_pixels()
+    x = ground_of_pixels(view)[..., 0]  # where each pixel's ray meets the ground (y = 0)
     shaded = grass_pixels & (x > -90.0) & (x < 50.0)
     lit = grass_pixels & (x < -300.0)  # a pixel shows grass up to 20 m tall in front of where its ray lands
     assert shaded.sum() > 20 and lit.sum() > 20
@@ -443,3 +429,58 @@ color = [0.8, 0.3, 0.2]
     grass = np.abs(images[True, False] - images[True, True]).sum(axis=-1) > 20.0  # blades drawn over the ground
     darker = (images[False, False] - images[True, False]).sum(axis=-1) > 40.0
     assert (grass & darker).sum() > 40  # blades in the slab's shadow lost the sun
+
+
+def test_the_cached_images_receive_the_suns_shadow_map(tmp_path):
+    """Level 4: a slab 60 m over a flat field, seen from far enough that every cell is a cached image, shades the
+    images' grass where the slab's shadow falls on the ground (the shadow map looked up per pixel at the depth the
+    atlas holds); the grass away from it keeps its bits; the rectangles no caster can reach keep the plain shader.
+    Before, level 4 took no shadow from the map at all."""
+    slab_centre, slab_half, height = np.array([0.0, 60.0, 0.0]), np.array([150.0, 2.0, 120.0]), 60.0
+    slab = f"""
+[[entities]]
+name = "slab"
+[entities.components.Transform]
+position = {slab_centre.tolist()}
+scale = {(2.0 * slab_half).tolist()}
+[entities.components.Mesh]
+shape = "box"
+color = [0.8, 0.3, 0.2]
+"""
+    sun = np.array([0.3, 0.7, -0.8])  # the shadow falls towards the camera, in view
+    grass = SMALL.replace("plants_per_cell = 16", "plants_per_cell = 64") + "grid_x = 8\ngrid_z = 8\n"
+    images, counts = {}, {}
+    for shadows, hide in ((True, False), (False, False), (True, True)):
+        camera = _camera((-60.0, 900.0, 700.0), pitch=-52.0) + ('hide_features = ["grass_field"]\n' if hide else "")
+        app = _app(tmp_path, grass, camera + slab)
+        app.config.render.sun_direction = tuple(sun)
+        app.config.render.shadows = shadows
+        app.config.render.shadow_distance = 2500.0
+        app.config.render.fog_density = 0.0
+        _walled(app, 0.0)
+        renderer = make_renderer(app, 160, 120)
+        try:
+            app.step(1)
+            app.render_frame()
+            images[shadows, hide] = np.asarray(renderer.read_image()).astype(float)
+            view = renderer.views[0]
+            if not hide:
+                plan = next(iter(_feature(app).plans.values()))
+                gpu = next(iter(_feature(app).fields.values()))
+                assert len(plan.impostor_cells) > 20 and sum(len(p) for p in plan.plants) == 0
+                counts[shadows] = gpu.shadowed_rectangles
+        finally:
+            renderer.release()
+            app.renderer = None
+    assert counts[False] == 0 and 0 < counts[True] < 64  # receiver culling: not every cell
+    grass = np.abs(images[True, False] - images[True, True]).sum(axis=-1) > 20.0
+    ground = ground_of_pixels(view)
+    # the slab's shadow on the ground: its footprint moved away from the sun by height / tan(elevation)
+    shift = -sun[[0, 2]] / np.linalg.norm(sun) * (height / (sun[1] / np.linalg.norm(sun)))
+    rel = np.abs(ground[..., [0, 2]] - (slab_centre[[0, 2]] + shift))
+    inside = grass & (rel < slab_half[[0, 2]] - 25.0).all(axis=-1)  # grass stands up to 20 m over its ground
+    outside = grass & (rel > slab_half[[0, 2]] + 60.0).any(axis=-1)
+    assert inside.sum() > 40 and outside.sum() > 100
+    on, off = images[True, False], images[False, False]
+    assert (on[inside].sum(axis=-1) < off[inside].sum(axis=-1) - 20.0).mean() > 0.9  # the sun's share is gone
+    np.testing.assert_allclose(on[outside], off[outside], atol=2.0)
