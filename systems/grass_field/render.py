@@ -53,7 +53,7 @@ __all__ = ["GrassFieldFeature", "FieldGpu", "FieldFrame"]
 log = logging.getLogger("grass_field")
 SHADERS = Path(__file__).parent / "shaders"
 TEXTURE_WIDTH = 4096
-IMPOSTOR_FLOATS = 8
+IMPOSTOR_FLOATS = 9  # centre (3), facing, two views, blend weight, level, the cell's relief
 # draw group (geometry.DRAW_GROUPS) -> (primitive mode, back faces culled): the closed tubes' faces turned away from
 # the eye are hidden by those turned towards it, so half their triangles never reach the rasteriser
 GROUP_DRAWS = {"tubes": (moderngl.TRIANGLES, True), "leaves": (moderngl.TRIANGLES, False),
@@ -180,6 +180,9 @@ class FieldGpu:
         self.impostor_buf = ctx.buffer(reserve=self.cell_capacity * IMPOSTOR_FLOATS * 4)
         self.impostor_shadowed_buf = ctx.buffer(reserve=self.cell_capacity * IMPOSTOR_FLOATS * 4)
         self.shadowed_rectangles = 0  # level-4 rectangles of the last draw() drawn with the sun shadow look-up
+        # level-4 rectangles write the depth of their texels' grass (GRASS_DEPTH; off: the rectangle's, in front of
+        # the whole cell, as the paper drew them; A/B, tests)
+        self.grass_depth = True
         # level 5: the band
         self.band_entries: OrderedDict[tuple[int, int], _BandEntry] = OrderedDict()
         self.band_layout: AtlasLayout | None = None
@@ -203,19 +206,22 @@ class FieldGpu:
     # ------------------------------------------------------------------------------ programs, arrays
     def _program(self, name: str, *, debug: bool = False, fog: bool = False,
                  band_distance: bool = False, terrain_shadow: bool = False,
-                 shadows: tuple[str, ...] = (), atlas_depth: bool = False) -> moderngl.Program:
+                 shadows: tuple[str, ...] = (), atlas_depth: bool = False,
+                 grass_depth: bool = False) -> moderngl.Program:
         """``name.vert`` + ``name.frag`` compiled with the defines DEBUG_LEVELS (the debug view), FOG (the view
         has fog), BAND_DISTANCE (the band's capture: the level-4 rectangles also write their distance from the
         eye), TERRAIN_SHADOW (the level-4 rectangles read the terrain's shadow), ``shadows`` (the plants and the
         level-4 rectangles read the sun's shadow map: engine/render/shadows.py's defines), ATLAS_DEPTH (the LOD
-        cache's bake also writes each texel's depth) and, for the level-4 rectangles, BLEND_VIEWS
-        (``blend_views``); shared through the renderer."""
-        key = (name, debug, fog, band_distance, terrain_shadow, shadows, atlas_depth)
+        cache's bake also writes each texel's depth), GRASS_DEPTH (the level-4 rectangles write their texels'
+        grass's depth) and, for the level-4 rectangles, BLEND_VIEWS (``blend_views``); shared through the
+        renderer."""
+        key = (name, debug, fog, band_distance, terrain_shadow, shadows, atlas_depth, grass_depth)
         prog = self._programs.get(key)
         if prog is not None:
             return prog
         defines = tuple(d for d, on in (("DEBUG_LEVELS", debug), ("FOG", fog), ("BAND_DISTANCE", band_distance),
                                         ("TERRAIN_SHADOW", terrain_shadow), ("ATLAS_DEPTH", atlas_depth),
+                                        ("GRASS_DEPTH", grass_depth),
                                         ("BLEND_VIEWS", name == "impostor" and self.cfg.blend_views)) if on)
         defines += shadows
         try:
@@ -237,9 +243,10 @@ class FieldGpu:
                 vao = self.ctx.vertex_array(prog, [(self.mesh_vbo[level], "4f 4f", "in_a", "in_b"),
                                                    (records, "4f 4f /i", "i_p0", "i_p1")],
                                             index_buffer=self.mesh_ibo[level], index_element_size=4)
-            elif what[0] == "impostor":  # i_level feeds only the debug view: absent from the other variants
-                vao = self.ctx.vertex_array(prog, [(what[1], "3f 1f 2f 1f 1f /i", "i_centre", "i_face",
-                                                    "i_tiles", "i_blend", "i_level")], skip_errors=True)
+            elif what[0] == "impostor":  # i_level feeds only the debug view, i_relief GRASS_DEPTH: absent from
+                # the other variants
+                vao = self.ctx.vertex_array(prog, [(what[1], "3f 1f 2f 1f 1f 1f /i", "i_centre", "i_face",
+                                                    "i_tiles", "i_blend", "i_level", "i_relief")], skip_errors=True)
             else:
                 vao = self.ctx.vertex_array(prog, [(self.band_buf, "3f 2f", "in_position", "in_uv")])
             self._vaos[key] = vao
@@ -468,6 +475,8 @@ class FieldGpu:
             data[:, 4:6] = self.data.cell_variant[cells, None] * N_VIEWS + views
             data[:, 6] = blend
             data[:, 7] = level
+            placed = self.data.placed
+            data[:, 8] = np.maximum(placed.cell_ground[cells, 1] - placed.cell_centre[cells, 1], 0.0)
             (self.impostor_buf if buffer is None else buffer).write(data.tobytes())
         return len(cells)
 
@@ -666,19 +675,23 @@ class FieldGpu:
         return {} if terrain is None else terrain.uniforms(self.ctx)
 
     def _shade_uniforms(self, terrain: TerrainShadow | None, receiving: bool) -> dict[str, Any]:
-        """impostor.frag's shaded colour factor (where the terrain or the sun's shadow map hides the sun) and
-        the unit of the atlas's depth image (the shadow map's look-up point), or nothing when neither applies."""
+        """impostor.frag's shaded colour factor (where the terrain or the sun's shadow map hides the sun), or
+        nothing when neither applies."""
         if terrain is None and not receiving:
             return {}
         r = self.renderer
         sky = np.asarray(r.settings.sky_top, np.float64) * r.ambient  # lit.glsl's hemisphere light, upwards
         sun = np.asarray(r.sun_color, np.float64) * max(float(r.sun_direction[1]), 0.0)
         shade = sky / np.maximum(sun + sky, 1e-6)
-        out = {"shade_factor": tuple(float(x) for x in shade)}
-        if receiving:
-            distance, near, far = bake_depth_range(self.frame)
-            out.update(atlas_depth=2, bake_depth=(distance, far - near))
-        return out
+        return {"shade_factor": tuple(float(x) for x in shade)}
+
+    def _depth_uniforms(self, used: bool) -> dict[str, Any]:
+        """impostor.vert's and .frag's uniforms for the texels' grass positions (the atlas's depth image on unit 2),
+        when ``used`` (the SHADOWS or GRASS_DEPTH variant)."""
+        if not used:
+            return {}
+        distance, near, far = bake_depth_range(self.frame)
+        return dict(atlas_depth=2, bake_depth=(distance, far - near), depth_margin=0.25 * self.data.plant_height)
 
     def sync_lighting(self) -> None:
         """Follow the renderer's light and the terrain's shadow: a new sun or sky (a hot reload) re-bakes the
@@ -773,13 +786,14 @@ class FieldGpu:
             if not count:
                 continue
             prog = self._program("impostor", debug=debug, fog=fog, terrain_shadow=terrain is not None,
-                                 shadows=shadow[1] if receiving else ())
+                                 shadows=shadow[1] if receiving else (), grass_depth=self.grass_depth)
             set_uniforms(prog, **{**lighting, **self._impostor_uniforms(view.view_proj, view.camera_pos, view.ortho),
                                   **self._terrain_uniforms(terrain), **self._shade_uniforms(terrain, receiving),
+                                  **self._depth_uniforms(receiving or self.grass_depth),
                                   **(shadow[2] if receiving else {})})
             self.atlas.use(0)
             self.bounds_tex.use(1)
-            if receiving:
+            if receiving or self.grass_depth:
                 self.atlas_depth.use(2)
             self._vao(prog, ("impostor", buf)).render(moderngl.TRIANGLE_STRIP, vertices=4, instances=count)
             self.draw_calls += 1

@@ -8,7 +8,8 @@
 // TERRAIN_SHADOW (the terrain hides the sun from part of the field: the image, lit by the whole sun, is scaled
 // towards its shaded colour; the band's capture keeps it, so the band needs nothing more), SHADOWS (the sun's
 // shadow map, per pixel where the texel's grass stands: the atlas's second image holds its depth in the cached
-// view; only the cells a caster's shadow may reach take it).
+// view; only the cells a caster's shadow may reach take it), GRASS_DEPTH (the fragment's depth is where the
+// texel's grass stands, not the rectangle's: what stands inside the cell is hidden only by the grass in front).
 uniform sampler2D atlas_tex;
 in vec2 v_uv_a;
 in vec2 v_uv_b;
@@ -19,10 +20,14 @@ out vec4 frag;
 #ifdef TERRAIN_SHADOW
 in float v_sun;
 #endif
-#ifdef SHADOWS
+#if defined(SHADOWS) || defined(GRASS_DEPTH)
 uniform sampler2D atlas_depth;  // (window depth · coverage, coverage) of the cached views, mip levels box-filtered
 in vec3 v_grass;
 flat in vec3 v_depth_dir;
+#endif
+#ifdef GRASS_DEPTH
+in vec2 v_clip;
+flat in vec2 v_clip_dir;
 #endif
 #if defined(TERRAIN_SHADOW) || defined(SHADOWS)
 // the cached images hold level-3 grass (dots, lit with an upward normal and no specular: plant.vert), so the
@@ -41,14 +46,21 @@ void main() {
 #endif
     if (c.a < 0.5) discard;
     vec3 col = c.rgb / c.a;
+#if defined(SHADOWS) || defined(GRASS_DEPTH)
+    vec2 depth = texture(atlas_depth, v_uv_a).rg;
+    float texel_depth = depth.r / max(depth.g, 1e-4);
+#endif
+#ifdef GRASS_DEPTH
+    vec2 zw = v_clip + texel_depth * v_clip_dir;
+    gl_FragDepth = clamp(0.5 * zw.x / zw.y + 0.5, 0.0, 1.0);
+#endif
 #if defined(TERRAIN_SHADOW) || defined(SHADOWS)
     float sun = 1.0;
 #ifdef TERRAIN_SHADOW
     sun = v_sun;
 #endif
 #ifdef SHADOWS
-    vec2 depth = texture(atlas_depth, v_uv_a).rg;
-    sun *= sun_visibility(shadow_coord(v_grass + (depth.r / max(depth.g, 1e-4)) * v_depth_dir, vec3(0.0, 1.0, 0.0)));
+    sun *= sun_visibility(shadow_coord(v_grass + texel_depth * v_depth_dir, vec3(0.0, 1.0, 0.0)));
 #endif
     col *= mix(shade_factor, vec3(1.0), sun);
 #endif

@@ -20,6 +20,7 @@ in float i_face;
 in vec2 i_tiles;
 in float i_blend;
 in float i_level;
+in float i_relief;      // how far the cell's ground strays from the flat ground its images were baked on
 out vec2 v_uv_a;
 out vec2 v_uv_b;
 out float v_blend;
@@ -32,13 +33,22 @@ out vec3 v_world;       // the rectangle's point where the cell stands (before t
 out float v_sun;        // the share of the sun the terrain leaves on the ground there (per corner, interpolated;
                         // the ground's, as the plants of levels 0-3 take it at their foot)
 #endif
-#ifdef SHADOWS
-// The sun's shadow map per pixel (impostor.frag): where the texel's grass stands is the point of the cached view's
-// orthographic camera at the texel's window depth, in the rectangle's frame (the view turned to face as the
-// rectangle is, so the shade lands on what is drawn): v_grass + depth · v_depth_dir.
+#if defined(SHADOWS) || defined(GRASS_DEPTH)
+// Where the texel's grass stands (impostor.frag): the point of the cached view's orthographic camera at the
+// texel's window depth (the atlas's depth image), in the rectangle's frame (the view turned to face as the
+// rectangle is, so it matches what is drawn): v_grass + depth · v_depth_dir.
 uniform vec2 bake_depth;  // the cached views' camera: its distance from the cell's centre, far - near
 out vec3 v_grass;         // the point at window depth 0 (the near plane)
 flat out vec3 v_depth_dir;
+#endif
+#ifdef GRASS_DEPTH
+// GRASS_DEPTH: the fragment's depth is that point's (clip z and w linear in the depth: v_clip + depth ·
+// v_clip_dir), moved towards the eye by the cell's relief and a quarter of a plant height (the images stand on
+// flat ground; the terrain under the cell may rise by that much), instead of the rectangle's, which is pushed in
+// front of the whole cell and so hides what stands inside it (a player walking through the grass).
+uniform float depth_margin;
+out vec2 v_clip;
+flat out vec2 v_clip_dir;
 #endif
 vec2 tile_uv(float tile, vec2 local) {
     int t = int(tile + 0.5);
@@ -57,10 +67,15 @@ void main() {
     vec3 right, up, normal;
     impostor_basis(i_face, elevation, right, up, normal);
     vec3 world = i_centre + ((corner.x * 2.0 - 1.0) * frame.x) * right + mix(frame.y, frame.z, corner.y) * up;
-#ifdef SHADOWS
+#if defined(SHADOWS) || defined(GRASS_DEPTH)
     // impostor.bake_view_proj: an orthographic camera at normal · (2 depth + 1) looking down -normal, near 0.5
     v_grass = world + normal * (bake_depth.x - 0.5);
     v_depth_dir = -normal * bake_depth.y;
+#endif
+#ifdef GRASS_DEPTH
+    vec3 toward_eye = ortho == 0 ? normalize(eye - world) : normal;
+    v_clip = (view_proj * vec4(v_grass + toward_eye * (i_relief + depth_margin), 1.0)).zw;
+    v_clip_dir = (view_proj * vec4(v_depth_dir, 0.0)).zw;
 #endif
     v_fog = clamp(1.0 - exp(-length(camera_pos - world) * fog_density), 0.0, 1.0);
 #ifdef BAND_DISTANCE

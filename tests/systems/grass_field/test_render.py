@@ -8,7 +8,7 @@ import pytest
 
 from components.grass_field import GrassFieldState
 from engine.app import App
-from tests.render_utils import assert_golden, ground_of_pixels, make_renderer, render_app, respawn
+from tests.render_utils import assert_golden, ground_of_pixels, make_renderer, render_app, respawn, world_pixel
 from tests.systems.grass_field.helpers import scene_text, write_scene
 
 SMALL = 'preset = "grass_field/paper"\nplants_per_cell = 16\ncell_variants = 3\nplant_variants = 4\n'
@@ -432,11 +432,11 @@ color = [0.8, 0.3, 0.2]
 
 
 def test_the_cached_images_receive_the_suns_shadow_map(tmp_path):
-    """Level 4: a slab 60 m over a flat field, seen from far enough that every cell is a cached image, shades the
+    """Level 4: a slab 100 m over a flat field, seen from far enough that every cell is a cached image, shades the
     images' grass where the slab's shadow falls on the ground (the shadow map looked up per pixel at the depth the
     atlas holds); the grass away from it keeps its bits; the rectangles no caster can reach keep the plain shader.
     Before, level 4 took no shadow from the map at all."""
-    slab_centre, slab_half, height = np.array([0.0, 60.0, 0.0]), np.array([150.0, 2.0, 120.0]), 60.0
+    slab_centre, slab_half, height = np.array([0.0, 100.0, 0.0]), np.array([150.0, 2.0, 120.0]), 100.0
     slab = f"""
 [[entities]]
 name = "slab"
@@ -447,7 +447,7 @@ scale = {(2.0 * slab_half).tolist()}
 shape = "box"
 color = [0.8, 0.3, 0.2]
 """
-    sun = np.array([0.3, 0.7, -0.8])  # the shadow falls towards the camera, in view
+    sun = np.array([0.3, 0.6, -0.8])  # the shadow falls towards the camera, in view
     grass = SMALL.replace("plants_per_cell = 16", "plants_per_cell = 64") + "grid_x = 8\ngrid_z = 8\n"
     images, counts = {}, {}
     for shadows, hide in ((True, False), (False, False), (True, True)):
@@ -458,7 +458,7 @@ color = [0.8, 0.3, 0.2]
         app.config.render.shadow_distance = 2500.0
         app.config.render.fog_density = 0.0
         _walled(app, 0.0)
-        renderer = make_renderer(app, 160, 120)
+        renderer = make_renderer(app, 320, 240)
         try:
             app.step(1)
             app.render_frame()
@@ -484,3 +484,53 @@ color = [0.8, 0.3, 0.2]
     on, off = images[True, False], images[False, False]
     assert (on[inside].sum(axis=-1) < off[inside].sum(axis=-1) - 20.0).mean() > 0.9  # the sun's share is gone
     np.testing.assert_allclose(on[outside], off[outside], atol=2.0)
+
+
+def test_what_stands_in_the_cached_images_grass_is_hidden_only_by_the_grass_in_front(tmp_path):
+    """A tower 60 m tall stands in a field drawn as cached images (level 4), seen from high above: no grass (20 m
+    tall) lies between the eye and the tower's top, so its top keeps the bits it has without the grass.  The
+    rectangles write the depth of their texels' grass; drawn at the rectangle's depth (the paper's way, pushed in
+    front of the whole cell, `grass_depth` off) the grass behind the tower was painted over its top."""
+    tower = """
+[[entities]]
+name = "tower"
+[entities.components.Transform]
+position = [30.0, 30.0, 20.0]
+scale = [40.0, 60.0, 40.0]
+[entities.components.Mesh]
+shape = "box"
+color = [0.9, 0.1, 0.1]
+"""
+    grass = SMALL.replace("plants_per_cell = 16", "plants_per_cell = 64") + "grid_x = 8\ngrid_z = 8\n"
+    images = {}
+    for case in ("no grass", "grass", "rectangle depth"):
+        camera = _camera((-60.0, 700.0, 600.0), pitch=-45.0)
+        camera += 'hide_features = ["grass_field"]\n' if case == "no grass" else ""
+        app = _app(tmp_path, grass, camera + tower)
+        app.config.render.fog_density = 0.0
+        app.config.render.shadows = False
+        _walled(app, 0.0)
+        renderer = make_renderer(app, 320, 240)
+        try:
+            app.step(1)
+            app.render_frame()
+            if case == "rectangle depth":
+                next(iter(_feature(app).fields.values())).grass_depth = False
+                app.render_frame()
+            images[case] = np.asarray(renderer.read_image()).astype(float)
+            view = renderer.views[0]
+            if case != "no grass":
+                plan = next(iter(_feature(app).plans.values()))
+                assert len(plan.impostor_cells) > 20 and sum(len(p) for p in plan.plants) == 0
+        finally:
+            renderer.release()
+            app.renderer = None
+    s = np.linspace(-17.0, 17.0, 60)
+    top = {world_pixel(view, (30.0 + x, 60.0, 20.0 + z)) for x in s for z in s}  # the top, inset by 3 m
+    rows, cols = np.array(sorted(top)).T
+    assert len(top) > 100
+    clean, drawn, old = (images[k][rows, cols] for k in ("no grass", "grass", "rectangle depth"))
+    assert (np.abs(old - clean).max(axis=-1) > 10.0).sum() > 5  # the old way covers part of the top
+    np.testing.assert_allclose(drawn, clean, atol=2.0)
+    # and the grass is still drawn around the tower
+    assert (np.abs(images["grass"] - images["no grass"]).max(axis=-1) > 10.0).sum() > 2000
