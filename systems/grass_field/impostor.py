@@ -30,7 +30,8 @@ from systems.grass_field.lod import N_BAND_SIDES, N_VIEWS
 
 __all__ = ["impostor_basis", "TileFrame", "tile_frame", "tile_pixels", "tile_bounds", "AtlasLayout", "atlas_layout",
            "look_at", "perspective", "orthographic", "frustum", "bake_view_proj", "band_side_frame",
-           "band_view_proj", "bake_depth_range", "coverage_mipmaps", "cache_key", "DiskCache", "Progress", "CACHE_FORMAT"]
+           "band_view_proj", "bake_depth_range", "coverage_mipmaps", "box_mipmaps", "cache_key", "DiskCache",
+           "Progress", "CACHE_FORMAT"]
 
 log = logging.getLogger("grass_field")
 CACHE_FORMAT = 3  # 2: level-3 shading with the specular power as squarings (plant.frag); 3: with the depth image
@@ -238,6 +239,22 @@ def coverage_mipmaps(image: np.ndarray, levels: int = ATLAS_MIP_LEVELS, threshol
                 level = np.clip(level * scale, 0.0, 1.0)
                 level[..., :3] = np.minimum(level[..., :3], level[..., 3:4])
         out.append(np.round(level * 255.0).astype(np.uint8))
+    return out
+
+
+def box_mipmaps(image: np.ndarray, levels: int = ATLAS_MIP_LEVELS) -> list[np.ndarray]:
+    """Mip levels 1..``levels`` of ``image`` (h, w, channels) as plain means of 2 × 2 texels, over the same texels
+    as :func:`coverage_mipmaps` (an odd last row or column left out, as GL sizes a level): the atlas's depth image
+    (depth · coverage, coverage), whose levels must have coverage wherever the colour's pass the alpha test.
+    float32 (the caller converts)."""
+    out, current = [], np.asarray(image, np.float32)
+    for _ in range(levels):
+        h, w = current.shape[0] // 2, current.shape[1] // 2
+        if h < 1 or w < 1:
+            break
+        c = current[:2 * h, :2 * w]
+        current = (c[0::2, 0::2] + c[1::2, 0::2] + c[0::2, 1::2] + c[1::2, 1::2]) * np.float32(0.25)
+        out.append(current)
     return out
 
 

@@ -39,7 +39,7 @@ from systems.grass_field.frame import FramePlan, band_apothem, band_sector_conte
 from systems.grass_field.geometry import DRAW_GROUPS, LEVELS, CompactMesh, compact_mesh
 from systems.grass_field.impostor import (ATLAS_MIP_LEVELS, AtlasLayout, DiskCache, Progress, atlas_layout,
                                           bake_depth_range, band_side_frame, band_view_proj, bake_view_proj,
-                                          cache_key,
+                                          box_mipmaps, cache_key,
                                           coverage_mipmaps, impostor_basis, tile_bounds, tile_frame, tile_pixels)
 from systems.grass_field.lod import (N_BAND_SIDES, N_VIEWS, CameraInput, ImpostorOrientation, band_distance,
                                      camera_from_view)
@@ -404,9 +404,12 @@ class FieldGpu:
         self.atlas.build_mipmaps(0, ATLAS_MIP_LEVELS)
         for level, mip in enumerate(coverage_mipmaps(image, ATLAS_MIP_LEVELS), start=1):
             self.atlas.write(np.ascontiguousarray(mip).tobytes(), level=level)
-        # the depth's levels: plain box filters of (depth · coverage, coverage), so their ratio is the covered
-        # texels' mean depth wherever the colour's coverage-scaled alpha passes
+        # the depth's levels: plain box filters of (depth · coverage, coverage) over the colour levels' texels, so
+        # their ratio is the covered texels' mean depth wherever the colour's coverage-scaled alpha passes (GL's
+        # generated levels filter other texels at odd sizes: grass in colour, none in depth, read as depth 0)
         self.atlas_depth.build_mipmaps(0, ATLAS_MIP_LEVELS)
+        for level, mip in enumerate(box_mipmaps(depth, ATLAS_MIP_LEVELS), start=1):
+            self.atlas_depth.write(np.ascontiguousarray(mip, np.float16).tobytes(), level=level)
         # bilinear within the nearest mip level: trilinear filtering fetches twice the texels of an alpha-tested
         # image for a blend the coverage-preserving levels barely need (-25 % of the level-4 pass on llvmpipe)
         for tex in (self.atlas, self.atlas_depth):

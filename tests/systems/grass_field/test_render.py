@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from components.grass_field import GrassFieldState
+from systems.grass_field.impostor import ATLAS_MIP_LEVELS
 from engine.app import App
 from tests.render_utils import assert_golden, ground_of_pixels, make_renderer, render_app, respawn, world_pixel
 from tests.systems.grass_field.helpers import scene_text, write_scene
@@ -534,3 +535,35 @@ color = [0.9, 0.1, 0.1]
     np.testing.assert_allclose(drawn, clean, atol=2.0)
     # and the grass is still drawn around the tower
     assert (np.abs(images["grass"] - images["no grass"]).max(axis=-1) > 10.0).sum() > 2000
+
+
+def test_the_depth_images_mip_levels_cover_what_the_colours_alpha_test_passes(tmp_path):
+    """The atlas's depth image (depth · coverage, coverage) is box-filtered over the same texels as the colour's
+    coverage-preserving levels, so wherever a level's alpha test passes its depth has coverage and holds the mean
+    depth of the covered texels below it.  GL's generated levels sampled other texels at odd sizes (819 → 409 →
+    204): texels with grass in colour and none in depth, read as depth 0, the bake camera's near plane (2 · depth
+    in front of the cell)."""
+    grass = SMALL.replace("plants_per_cell = 16", "plants_per_cell = 64") + "grid_x = 4\ngrid_z = 4\n"
+    app = _app(tmp_path, grass, _camera((0.0, 30.0, 0.0)), terrain=False)
+    renderer = make_renderer(app, 32, 24)
+    try:
+        app.step(1)
+        app.render_frame()
+        gpu = next(iter(_feature(app).fields.values()))
+        gpu.ensure_impostors()
+        w, h = gpu.layout.size
+        assert w % 2 or (w // 2) % 2 or h % 2 or (h // 2) % 2  # the layout this test is about: an odd level
+        base = np.frombuffer(gpu.atlas_depth.read(), np.float16).reshape(h, w, 2).astype(np.float64)
+        for level in range(1, ATLAS_MIP_LEVELS + 1):
+            lw, lh, k = w >> level, h >> level, 2 ** level
+            colour = np.frombuffer(gpu.atlas.read(level=level), np.uint8).reshape(lh, lw, 4)
+            depth = np.frombuffer(gpu.atlas_depth.read(level=level), np.float16).reshape(lh, lw, 2).astype(float)
+            passes = colour[..., 3] >= 128
+            assert passes.sum() > 100
+            assert not (passes & (depth[..., 1] <= 0.0)).any(), level
+            box = base[:lh * k, :lw * k].reshape(lh, k, lw, k, 2).mean(axis=(1, 3))
+            np.testing.assert_allclose(depth[passes], box[passes], atol=2e-3, rtol=2e-3)
+    finally:
+        renderer.release()
+        app.renderer = None
+
