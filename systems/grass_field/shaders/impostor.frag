@@ -48,6 +48,10 @@ void main() {
     vec3 col = c.rgb / c.a;
 #if defined(SHADOWS) || defined(GRASS_DEPTH)
     vec2 depth = texture(atlas_depth, v_uv_a).rg;
+#ifdef BLEND_VIEWS
+    // as the colour: where only the second view has grass, the first's holds no depth (read as the near plane)
+    depth = mix(depth, texture(atlas_depth, v_uv_b).rg, v_blend);
+#endif
     float texel_depth = depth.r / max(depth.g, 1e-4);
 #endif
 #ifdef GRASS_DEPTH

@@ -567,3 +567,49 @@ def test_the_depth_images_mip_levels_cover_what_the_colours_alpha_test_passes(tm
         renderer.release()
         app.renderer = None
 
+
+@pytest.mark.parametrize("blend", [False, True])
+def test_the_rectangles_grass_depth_lies_behind_the_rectangle(tmp_path, monkeypatch, blend):
+    """Each level-4 fragment's depth (GRASS_DEPTH) is that of its texel's grass, at most the depth margin in front
+    of the rectangle (which lies in front of the whole cell).  With ``blend_views`` the depth was read from the
+    first view's image alone: where only the second view has grass it read depth 0, the bake camera's near plane,
+    and wrote a point twice the cell's depth in front of it (up to 95 m in front of the rectangle)."""
+    from systems.grass_field.render import FieldGpu
+
+    grass = SMALL.replace("plants_per_cell = 16", "plants_per_cell = 64") + "grid_x = 8\ngrid_z = 8\n"
+    grass += "blend_views = true\n" if blend else ""
+    captured, original = {}, FieldGpu.draw
+
+    def draw(self, fbo, plan, view, *args, **kwargs):  # the view's depth right after the grass's pass
+        original(self, fbo, plan, view, *args, **kwargs)
+        w, h = fbo.size
+        captured["depth"] = np.frombuffer(fbo.read(components=1, attachment=-1, dtype="f4"), np.float32).reshape(h, w)
+        captured["proj"], captured["margin"] = view.proj.astype(np.float64), self._depth_uniforms(True)["depth_margin"]
+
+    monkeypatch.setattr(FieldGpu, "draw", draw)
+    distance = {}
+    for grass_depth in (True, False):
+        app = _app(tmp_path, grass, _camera((-60.0, 500.0, 900.0), pitch=-25.0, far=3000.0))
+        app.config.render.fog_density = 0.0
+        app.config.render.shadows = False
+        _walled(app, 0.0)
+        renderer = make_renderer(app, 320, 240)
+        try:
+            app.step(1)
+            app.render_frame()
+            gpu = next(iter(_feature(app).fields.values()))
+            gpu.grass_depth = grass_depth
+            app.render_frame()
+            plan = next(iter(_feature(app).plans.values()))
+            assert len(plan.impostor_cells) > 20 and sum(len(p) for p in plan.plants) == 0
+            if blend:
+                assert (plan.impostor_blend > 0.5).sum() > 5
+        finally:
+            renderer.release()
+            app.renderer = None
+        p = captured["proj"]
+        distance[grass_depth] = p[2, 3] / (2.0 * captured["depth"].astype(np.float64) - 1.0 + p[2, 2])  # eye -z
+    grass_pixels = distance[False] < distance[True] - 1.0
+    assert grass_pixels.sum() > 2000
+    nearer = distance[False] - distance[True]  # how far the grass's depth lies in front of the rectangle's
+    assert nearer.max() <= captured["margin"] + 1.0, (int((nearer > captured["margin"] + 1.0).sum()), nearer.max())
