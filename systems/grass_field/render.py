@@ -694,7 +694,7 @@ class FieldGpu:
         if not used:
             return {}
         distance, near, far = bake_depth_range(self.frame)
-        return dict(atlas_depth=2, bake_depth=(distance, far - near), depth_margin=0.25 * self.data.plant_height)
+        return dict(atlas_depth=2, bake_depth=(distance - near, far - near), depth_margin=0.25 * self.data.plant_height)
 
     def sync_lighting(self) -> None:
         """Follow the renderer's light and the terrain's shadow: a new sun or sky (a hot reload) re-bakes the

@@ -44,13 +44,18 @@ void main() {
 #ifdef BLEND_VIEWS
     c = mix(c, texture(atlas_tex, v_uv_b), v_blend);
 #endif
+#if defined(SHADOWS) || defined(GRASS_DEPTH)
+    // the depth image is read after the discard below, where implicit derivatives are undefined: take them here
+    // (the two views' tiles have the same scale)
+    vec2 uv_dx = dFdx(v_uv_a), uv_dy = dFdy(v_uv_a);
+#endif
     if (c.a < 0.5) discard;
     vec3 col = c.rgb / c.a;
 #if defined(SHADOWS) || defined(GRASS_DEPTH)
-    vec2 depth = texture(atlas_depth, v_uv_a).rg;
+    vec2 depth = textureGrad(atlas_depth, v_uv_a, uv_dx, uv_dy).rg;
 #ifdef BLEND_VIEWS
     // as the colour: where only the second view has grass, the first's holds no depth (read as the near plane)
-    depth = mix(depth, texture(atlas_depth, v_uv_b).rg, v_blend);
+    depth = mix(depth, textureGrad(atlas_depth, v_uv_b, uv_dx, uv_dy).rg, v_blend);
 #endif
     float texel_depth = depth.r / max(depth.g, 1e-4);
 #endif

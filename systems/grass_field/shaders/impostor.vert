@@ -37,7 +37,7 @@ out float v_sun;        // the share of the sun the terrain leaves on the ground
 // Where the texel's grass stands (impostor.frag): the point of the cached view's orthographic camera at the
 // texel's window depth (the atlas's depth image), in the rectangle's frame (the view turned to face as the
 // rectangle is, so it matches what is drawn): v_grass + depth · v_depth_dir.
-uniform vec2 bake_depth;  // the cached views' camera: its distance from the cell's centre, far - near
+uniform vec2 bake_depth;  // the cached views' camera: its near plane's distance from the cell's centre, far - near
 out vec3 v_grass;         // the point at window depth 0 (the near plane)
 flat out vec3 v_depth_dir;
 #endif
@@ -68,8 +68,8 @@ void main() {
     impostor_basis(i_face, elevation, right, up, normal);
     vec3 world = i_centre + ((corner.x * 2.0 - 1.0) * frame.x) * right + mix(frame.y, frame.z, corner.y) * up;
 #if defined(SHADOWS) || defined(GRASS_DEPTH)
-    // impostor.bake_view_proj: an orthographic camera at normal · (2 depth + 1) looking down -normal, near 0.5
-    v_grass = world + normal * (bake_depth.x - 0.5);
+    // impostor.bake_view_proj: an orthographic camera on the normal looking down -normal (bake_depth_range)
+    v_grass = world + normal * bake_depth.x;
     v_depth_dir = -normal * bake_depth.y;
 #endif
 #ifdef GRASS_DEPTH
