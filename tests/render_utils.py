@@ -11,6 +11,7 @@ they fail with a message naming the system packages to install.
 from __future__ import annotations
 
 import os
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -38,6 +39,19 @@ def make_renderer(app, width: int = 160, height: int = 120):
     from engine.render.renderer import Renderer
 
     return Renderer(app, gl_context(), width, height)
+
+
+@contextmanager
+def rendered(app, width: int = 160, height: int = 120):
+    """A renderer for ``app``, after one tick and one frame; released and detached from the app on exit."""
+    renderer = make_renderer(app, width, height)
+    try:
+        app.step(1)
+        app.render_frame()
+        yield renderer
+    finally:
+        renderer.release()
+        app.renderer = None
 
 
 def render_app(app, width: int = 160, height: int = 120, frames: int = 1, steps_per_frame: int = 1):

@@ -69,6 +69,13 @@ def _with_defines(source: str, defines: tuple[str, ...]) -> str:
     return head + "\n" + "".join(f"#define {name} 1\n" for name in defines) + rest
 
 
+def _write_levels(texture: moderngl.Texture, levels: list[np.ndarray], dtype) -> None:
+    """Mip levels 1, 2, … of ``texture`` from the CPU (allocated by GL first, then overwritten)."""
+    texture.build_mipmaps(0, len(levels))
+    for level, texels in enumerate(levels, start=1):
+        texture.write(np.ascontiguousarray(texels, dtype).tobytes(), level=level)
+
+
 def _data_texture(ctx: moderngl.Context, texels: np.ndarray) -> moderngl.Texture:
     """A 2-D texture holding ``texels`` (n, c) row by row, ``TEXTURE_WIDTH`` texels per row; nearest filtering."""
     texels = np.asarray(texels)
@@ -133,8 +140,8 @@ class FieldGpu:
         # fog and view blending are compiled in only where they are used (see _program)
         self._programs: dict[tuple[str, bool, bool, bool], moderngl.Program] = {}
         self._vaos: dict[tuple, moderngl.VertexArray] = {}
-        self.plant_prog = self._program("plant")
-        self.band_prog = self._program("band")
+        for name in ("plant", "band"):  # compiled now, so that a shader error shows when the field appears
+            self._program(name)
         placed = data.placed
         ctx = self.ctx
         self.plant_records = plant_records(placed.plant_position, placed.plant_yaw, placed.plant_scale,
@@ -401,15 +408,11 @@ class FieldGpu:
             if disk is not None:
                 self.disk_path = disk.store(key, image, depth)
         self.bounds_tex = _data_texture(self.ctx, tile_bounds(image, self.layout))
-        self.atlas.build_mipmaps(0, ATLAS_MIP_LEVELS)
-        for level, mip in enumerate(coverage_mipmaps(image, ATLAS_MIP_LEVELS), start=1):
-            self.atlas.write(np.ascontiguousarray(mip).tobytes(), level=level)
+        _write_levels(self.atlas, coverage_mipmaps(image, ATLAS_MIP_LEVELS), np.uint8)
         # the depth's levels: plain box filters of (depth · coverage, coverage) over the colour levels' texels, so
         # their ratio is the covered texels' mean depth wherever the colour's coverage-scaled alpha passes (GL's
         # generated levels filter other texels at odd sizes: grass in colour, none in depth, read as depth 0)
-        self.atlas_depth.build_mipmaps(0, ATLAS_MIP_LEVELS)
-        for level, mip in enumerate(box_mipmaps(depth, ATLAS_MIP_LEVELS), start=1):
-            self.atlas_depth.write(np.ascontiguousarray(mip, np.float16).tobytes(), level=level)
+        _write_levels(self.atlas_depth, box_mipmaps(depth, ATLAS_MIP_LEVELS), np.float16)
         # bilinear within the nearest mip level: trilinear filtering fetches twice the texels of an alpha-tested
         # image for a blend the coverage-preserving levels barely need (-25 % of the level-4 pass on llvmpipe)
         for tex in (self.atlas, self.atlas_depth):
@@ -694,7 +697,8 @@ class FieldGpu:
         if not used:
             return {}
         distance, near, far = bake_depth_range(self.frame)
-        return dict(atlas_depth=2, bake_depth=(distance - near, far - near), depth_margin=0.25 * self.data.plant_height)
+        return dict(atlas_depth=2, bake_depth=(distance - near, far - near),
+                    depth_margin=0.25 * self.data.plant_height)
 
     def sync_lighting(self) -> None:
         """Follow the renderer's light and the terrain's shadow: a new sun or sky (a hot reload) re-bakes the
@@ -747,11 +751,12 @@ class FieldGpu:
         shadowed = np.zeros(len(plan.impostor_cells), bool)
         if shadow is not None and len(plan.impostor_cells):
             shadowed = self._cells_reached(shadow[0], plan.impostor_cells)
-        groups = [~shadowed, shadowed] if shadowed.any() else [slice(None)]
-        rectangles = [self._impostor_instances(plan.impostor_cells[g], plan.impostor_face[g],
-                                               plan.impostor_views[g], plan.impostor_blend[g], 4, buf)
-                      for g, buf in zip(groups, (self.impostor_buf, self.impostor_shadowed_buf))]
-        self.shadowed_rectangles = rectangles[1] if len(rectangles) > 1 else 0
+        groups = ([(~shadowed, self.impostor_buf, False), (shadowed, self.impostor_shadowed_buf, True)]
+                  if shadowed.any() else [(slice(None), self.impostor_buf, False)])
+        rectangles = [(self._impostor_instances(plan.impostor_cells[g], plan.impostor_face[g], plan.impostor_views[g],
+                                                plan.impostor_blend[g], 4, buf), buf, receiving)
+                      for g, buf, receiving in groups]
+        self.shadowed_rectangles = int(shadowed.sum())
         band_vertices, band = 0, None
         if plan.band_cell is not None and plan.band_sides.any():
             band = self.band_entries[self._band_key(plan.band_cell, camera, viewer, plan.band_apothem,
@@ -785,7 +790,7 @@ class FieldGpu:
                 self._draw_plants(prog, self.instance_buf, commands, range(LEVELS), set_level if debug else None,
                                   command_set)
         # level 4 (the plan lists the rectangles nearest first; each group keeps that order)
-        for count, buf, receiving in zip(rectangles, (self.impostor_buf, self.impostor_shadowed_buf), (False, True)):
+        for count, buf, receiving in rectangles:
             if not count:
                 continue
             prog = self._program("impostor", debug=debug, fog=fog, terrain_shadow=terrain is not None,

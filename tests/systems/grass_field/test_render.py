@@ -9,10 +9,12 @@ import pytest
 from components.grass_field import GrassFieldState
 from systems.grass_field.impostor import ATLAS_MIP_LEVELS
 from engine.app import App
-from tests.render_utils import assert_golden, ground_of_pixels, make_renderer, render_app, respawn, world_pixel
+from tests.render_utils import (assert_golden, ground_of_pixels, make_renderer, render_app, rendered, respawn,
+                                world_pixel)
 from tests.systems.grass_field.helpers import scene_text, write_scene
 
 SMALL = 'preset = "grass_field/paper"\nplants_per_cell = 16\ncell_variants = 3\nplant_variants = 4\n'
+DENSE = SMALL.replace("plants_per_cell = 16", "plants_per_cell = 64")  # 64 plants a cell
 
 
 def _camera(position, yaw=0.0, pitch=-8.0, far=4000.0) -> str:
@@ -26,6 +28,16 @@ def _app(tmp_path, grass: str, camera: str, terrain: bool = True, name: str = "s
 
 def _feature(app):
     return next(f for f in app.renderer.features if f.name == "grass_field")
+
+
+def _gpu(app):
+    """The first field's GL side (FieldGpu)."""
+    return next(iter(_feature(app).fields.values()))
+
+
+def _plan(app):
+    """The first (field, view)'s last frame plan."""
+    return next(iter(_feature(app).plans.values()))
 
 
 def test_golden_near(tmp_path):
@@ -44,14 +56,11 @@ def test_lod_cache_bakes_each_view_once_and_reuses_it(tmp_path):
     grass = SMALL + f"grid_x = 16\ngrid_z = 16\ndisk_cache = true\ncache_dir = '{tmp_path / 'cache'}'\n"
     camera = _camera((0.0, 40.0, 700.0), pitch=-5.0)
     app = _app(tmp_path, grass, camera)
-    renderer = make_renderer(app, 96, 72)
-    try:
-        app.step(1)
-        app.render_frame()
-        gpu = next(iter(_feature(app).fields.values()))
+    with rendered(app, 96, 72) as renderer:
+        gpu = _gpu(app)
         assert gpu.baked_views == 3 * 12  # every view of every cell layout, once
         assert gpu.atlas is not None and gpu.layout.tiles == 36
-        plan = next(iter(_feature(app).plans.values()))
+        plan = _plan(app)
         assert len(plan.impostor_cells) > 0
         for _ in range(3):
             app.step(1)
@@ -59,12 +68,9 @@ def test_lod_cache_bakes_each_view_once_and_reuses_it(tmp_path):
         assert gpu.baked_views == 36  # reused across frames
         app.restore(app.snapshot())  # restored copies of the state draw the same field: no rebake
         app.render_frame()
-        assert next(iter(_feature(app).fields.values())) is gpu and gpu.baked_views == 36
+        assert _gpu(app) is gpu and gpu.baked_views == 36
         assert gpu.draw_calls <= 8  # instanced: a handful of draw calls, not one per cell or plant
         assert gpu.disk_path is not None and gpu.disk_path.is_file()
-    finally:
-        renderer.release()
-        app.renderer = None
     again = _app(tmp_path, grass, camera, name="again.toml")
     renderer = make_renderer(again, 96, 72)
     try:
@@ -80,10 +86,7 @@ def test_lod_cache_bakes_each_view_once_and_reuses_it(tmp_path):
 def test_band_is_baked_and_drawn_beyond_the_distance(tmp_path):
     app = _app(tmp_path, SMALL + "grid_x = 24\ngrid_z = 24\nband_cache_cells = 2\n",
                _camera((0.0, 40.0, 0.0), pitch=-3.0))
-    renderer = make_renderer(app, 96, 72)
-    try:
-        app.step(1)
-        app.render_frame()
+    with rendered(app, 96, 72) as renderer:
         feature = _feature(app)
         plan = next(iter(feature.plans.values()))
         gpu = next(iter(feature.fields.values()))
@@ -92,9 +95,6 @@ def test_band_is_baked_and_drawn_beyond_the_distance(tmp_path):
         bakes = gpu.band_bakes
         app.render_frame()
         assert gpu.band_bakes == bakes  # the viewer's cell did not change: no new bake
-    finally:
-        renderer.release()
-        app.renderer = None
 
 
 def _clarity_by_depth(tmp_path, grass: str, camera: str, name: str) -> np.ndarray:
@@ -132,11 +132,8 @@ def test_bands_are_prefetched_ahead_of_the_viewer_and_the_height_step_has_hyster
 
     app = _app(tmp_path, SMALL + "grid_x = 24\ngrid_z = 24\nband_cache_cells = 9\n",
                _camera((0.0, 40.0, 0.0), pitch=-3.0))
-    renderer = make_renderer(app, 96, 72)
-    try:
-        app.step(1)
-        app.render_frame()
-        gpu = next(iter(_feature(app).fields.values()))
+    with rendered(app, 96, 72) as renderer:
+        gpu = _gpu(app)
         placed = gpu.data.placed
         cell = int(placed.cell_of(np.array([0.0, 0.0])))
         base = placed.cell_centre[cell]
@@ -182,9 +179,6 @@ def test_bands_are_prefetched_ahead_of_the_viewer_and_the_height_step_has_hyster
         gpu.ensure_band(cell, narrow)
         gpu.ensure_band(cell, wide)
         assert gpu.band_layout.tile_w >= 3 * tile and gpu.band_bakes == bakes + 1
-    finally:
-        renderer.release()
-        app.renderer = None
 
 
 def test_debug_view_colours_cells_by_level(tmp_path):
@@ -213,11 +207,8 @@ def test_draws_without_multi_draw_indirect_match(tmp_path):
     """Before GL 4.3 (macOS stops at 4.1) each variant is one draw with rebound offsets instead of one command
     of a multi-draw indirect call: the same pixels, from more draw calls."""
     app = _app(tmp_path, SMALL + "grid_x = 6\ngrid_z = 6\n", _camera((0.0, 24.0, 40.0), pitch=-22.0))
-    renderer = make_renderer(app, 160, 120)
-    try:
-        app.step(1)
-        app.render_frame()
-        gpu = next(iter(_feature(app).fields.values()))
+    with rendered(app, 160, 120) as renderer:
+        gpu = _gpu(app)
         assert gpu.multi_draw  # llvmpipe offers GL 4.5
         indirect, calls = np.asarray(renderer.read_image(), np.int16), gpu.draw_calls
         gpu.multi_draw = False
@@ -225,9 +216,6 @@ def test_draws_without_multi_draw_indirect_match(tmp_path):
         single = np.asarray(renderer.read_image(), np.int16)
         assert gpu.draw_calls > calls
         assert np.array_equal(single, indirect)
-    finally:
-        renderer.release()
-        app.renderer = None
 
 
 def test_rendering_leaves_the_state_alone(tmp_path):
@@ -287,7 +275,7 @@ def _walled(app: App, height: float) -> None:
 def test_the_terrains_shadow_falls_on_the_grass(tmp_path, far):
     """Behind a wall, under a low sun from +x, the plants (levels 0-3) and the cached images (level 4) lose the
     sun's light; beyond the shade's edge the picture keeps its bits."""
-    grass = SMALL.replace("plants_per_cell = 16", "plants_per_cell = 64") + "grid_x = 8\ngrid_z = 8\n"
+    grass = DENSE + "grid_x = 8\ngrid_z = 8\n"
     camera = (_camera((-60.0, 900.0, 700.0), pitch=-52.0) if far else
               _camera((-5.0, 45.0, -150.0), yaw=90.0, pitch=-25.0))
     images = {}
@@ -299,16 +287,13 @@ def test_the_terrains_shadow_falls_on_the_grass(tmp_path, far):
         app.config.render.shadows = False
         app.config.render.fog_density = 0.0
         _walled(app, 100.0)
-        renderer = make_renderer(app, 160, 120)
-        try:
-            app.step(1)
-            app.render_frame()
+        with rendered(app, 160, 120) as renderer:
             images[on, hide] = np.asarray(renderer.read_image()).astype(float)
             view = renderer.views[0]
             if hide:
                 continue
-            gpu = next(iter(_feature(app).fields.values()))
-            plan = next(iter(_feature(app).plans.values()))
+            gpu = _gpu(app)
+            plan = _plan(app)
             assert len(plan.impostor_cells) > 10 if far else sum(len(p) for p in plan.plants) > 20
             sun = gpu.plant_records[:, 7]
             x = gpu.data.placed.plant_position[:, 0]
@@ -318,9 +303,6 @@ def test_the_terrains_shadow_falls_on_the_grass(tmp_path, far):
                 assert (sun < 1.0).sum() > 0.15 * len(sun)
             else:
                 assert (sun == 1.0).all()
-        finally:
-            renderer.release()
-            app.renderer = None
     grass_pixels = np.abs(images[False, False] - images[False, True]).sum(axis=-1) > 20.0
 
     x = ground_of_pixels(view)[..., 0]  # where each pixel's ray meets the ground (y = 0)
@@ -338,9 +320,9 @@ def test_a_view_that_hides_the_terrain_gets_none_of_its_shadow_on_the_grass(tmp_
     """Camera hide_features = ["terrain"]: the plants, the level-4 images and the band are lit as without the
     terrain's shadow (the hidden wall shades nothing in that view)."""
     grass, camera = {
-        "near": (SMALL.replace("plants_per_cell = 16", "plants_per_cell = 64") + "grid_x = 8\ngrid_z = 8\n",
+        "near": (DENSE + "grid_x = 8\ngrid_z = 8\n",
                  _camera((-5.0, 45.0, -150.0), yaw=90.0, pitch=-25.0)),
-        "far": (SMALL.replace("plants_per_cell = 16", "plants_per_cell = 64") + "grid_x = 8\ngrid_z = 8\n",
+        "far": (DENSE + "grid_x = 8\ngrid_z = 8\n",
                 _camera((-60.0, 900.0, 700.0), pitch=-52.0)),
         "band": (SMALL + "grid_x = 24\ngrid_z = 24\n", _camera((0.0, 40.0, 0.0), yaw=180.0, pitch=-3.0))}[case]
     images = {}
@@ -350,21 +332,15 @@ def test_a_view_that_hides_the_terrain_gets_none_of_its_shadow_on_the_grass(tmp_
         app.config.render.terrain_shadows = on
         app.config.render.shadows = False
         _walled(app, 100.0)
-        renderer = make_renderer(app, 160, 120)
-        try:
-            app.step(1)
-            app.render_frame()
+        with rendered(app, 160, 120) as renderer:
             images[on] = np.asarray(renderer.read_image()).astype(float)
             assert (renderer.terrain_shadow is not None) == on
-            gpu = next(iter(_feature(app).fields.values()))
-            plan = next(iter(_feature(app).plans.values()))
+            gpu = _gpu(app)
+            plan = _plan(app)
             assert {"near": sum(len(p) for p in plan.plants) > 20, "far": len(plan.impostor_cells) > 10,
                     "band": plan.band_cell is not None and plan.band_sides.any()}[case]
             if on:
                 assert (gpu.plant_records[:, 7] < 1.0).sum() > 0.05 * len(gpu.plant_records)
-        finally:
-            renderer.release()
-            app.renderer = None
     np.testing.assert_array_equal(images[True], images[False])
 
 
@@ -372,11 +348,8 @@ def test_a_new_sun_bakes_the_lod_cache_again(tmp_path):
     """A hot reload of the sun (or the sky) re-bakes the cached images, lit as the plants now are, and
     re-captures the band."""
     app = _app(tmp_path, SMALL + "grid_x = 16\ngrid_z = 16\n", _camera((0.0, 40.0, 700.0), pitch=-5.0))
-    renderer = make_renderer(app, 96, 72)
-    try:
-        app.step(1)
-        app.render_frame()
-        gpu = next(iter(_feature(app).fields.values()))
+    with rendered(app, 96, 72) as renderer:
+        gpu = _gpu(app)
         assert gpu.baked_views == 36
         before = np.asarray(renderer.read_image()).astype(float)
         app.render_frame()
@@ -386,9 +359,6 @@ def test_a_new_sun_bakes_the_lod_cache_again(tmp_path):
         assert gpu.baked_views == 72
         after = np.asarray(renderer.read_image()).astype(float)
         assert np.abs(after - before).max() > 10.0
-    finally:
-        renderer.release()
-        app.renderer = None
 
 
 def test_the_plants_receive_the_suns_shadow_map(tmp_path):
@@ -404,7 +374,7 @@ scale = [20.0, 2.0, 30.0]
 shape = "box"
 color = [0.8, 0.3, 0.2]
 """
-    grass = SMALL.replace("plants_per_cell = 16", "plants_per_cell = 64") + "grid_x = 8\ngrid_z = 8\n"
+    grass = DENSE + "grid_x = 8\ngrid_z = 8\n"
     images, shadowed = {}, {}
     for shadows, hide in ((True, False), (False, False), (True, True)):
         camera = _camera((-5.0, 45.0, -150.0), yaw=90.0, pitch=-25.0)
@@ -414,18 +384,12 @@ color = [0.8, 0.3, 0.2]
         app.config.render.shadows = shadows
         app.config.render.shadow_distance = 300.0
         app.config.render.fog_density = 0.0
-        renderer = make_renderer(app, 160, 120)
-        try:
-            app.step(1)
-            app.render_frame()
+        with rendered(app, 160, 120) as renderer:
             images[shadows, hide] = np.asarray(renderer.read_image()).astype(float)
             if not hide:
-                gpu = next(iter(_feature(app).fields.values()))
+                gpu = _gpu(app)
                 shadowed[shadows] = gpu.shadowed_plants
-                assert sum(len(p) for p in next(iter(_feature(app).plans.values())).plants) > 20
-        finally:
-            renderer.release()
-            app.renderer = None
+                assert sum(len(p) for p in _plan(app).plants) > 20
     assert shadowed[False] == 0 and shadowed[True] > 0
     grass = np.abs(images[True, False] - images[True, True]).sum(axis=-1) > 20.0  # blades drawn over the ground
     darker = (images[False, False] - images[True, False]).sum(axis=-1) > 40.0
@@ -449,7 +413,7 @@ shape = "box"
 color = [0.8, 0.3, 0.2]
 """
     sun = np.array([0.3, 0.6, -0.8])  # the shadow falls towards the camera, in view
-    grass = SMALL.replace("plants_per_cell = 16", "plants_per_cell = 64") + "grid_x = 8\ngrid_z = 8\n"
+    grass = DENSE + "grid_x = 8\ngrid_z = 8\n"
     images, counts = {}, {}
     for shadows, hide in ((True, False), (False, False), (True, True)):
         camera = _camera((-60.0, 900.0, 700.0), pitch=-52.0) + ('hide_features = ["grass_field"]\n' if hide else "")
@@ -459,20 +423,14 @@ color = [0.8, 0.3, 0.2]
         app.config.render.shadow_distance = 2500.0
         app.config.render.fog_density = 0.0
         _walled(app, 0.0)
-        renderer = make_renderer(app, 320, 240)
-        try:
-            app.step(1)
-            app.render_frame()
+        with rendered(app, 320, 240) as renderer:
             images[shadows, hide] = np.asarray(renderer.read_image()).astype(float)
             view = renderer.views[0]
             if not hide:
-                plan = next(iter(_feature(app).plans.values()))
-                gpu = next(iter(_feature(app).fields.values()))
+                plan = _plan(app)
+                gpu = _gpu(app)
                 assert len(plan.impostor_cells) > 20 and sum(len(p) for p in plan.plants) == 0
                 counts[shadows] = gpu.shadowed_rectangles
-        finally:
-            renderer.release()
-            app.renderer = None
     assert counts[False] == 0 and 0 < counts[True] < 64  # receiver culling: not every cell
     grass = np.abs(images[True, False] - images[True, True]).sum(axis=-1) > 20.0
     ground = ground_of_pixels(view)
@@ -502,7 +460,7 @@ scale = [40.0, 60.0, 40.0]
 shape = "box"
 color = [0.9, 0.1, 0.1]
 """
-    grass = SMALL.replace("plants_per_cell = 16", "plants_per_cell = 64") + "grid_x = 8\ngrid_z = 8\n"
+    grass = DENSE + "grid_x = 8\ngrid_z = 8\n"
     images = {}
     for case in ("no grass", "grass", "rectangle depth"):
         camera = _camera((-60.0, 700.0, 600.0), pitch=-45.0)
@@ -511,21 +469,15 @@ color = [0.9, 0.1, 0.1]
         app.config.render.fog_density = 0.0
         app.config.render.shadows = False
         _walled(app, 0.0)
-        renderer = make_renderer(app, 320, 240)
-        try:
-            app.step(1)
-            app.render_frame()
+        with rendered(app, 320, 240) as renderer:
             if case == "rectangle depth":
-                next(iter(_feature(app).fields.values())).grass_depth = False
+                _gpu(app).grass_depth = False
                 app.render_frame()
             images[case] = np.asarray(renderer.read_image()).astype(float)
             view = renderer.views[0]
             if case != "no grass":
-                plan = next(iter(_feature(app).plans.values()))
+                plan = _plan(app)
                 assert len(plan.impostor_cells) > 20 and sum(len(p) for p in plan.plants) == 0
-        finally:
-            renderer.release()
-            app.renderer = None
     s = np.linspace(-17.0, 17.0, 60)
     top = {world_pixel(view, (30.0 + x, 60.0, 20.0 + z)) for x in s for z in s}  # the top, inset by 3 m
     rows, cols = np.array(sorted(top)).T
@@ -543,13 +495,10 @@ def test_the_depth_images_mip_levels_cover_what_the_colours_alpha_test_passes(tm
     depth of the covered texels below it.  GL's generated levels sampled other texels at odd sizes (819 → 409 →
     204): texels with grass in colour and none in depth, read as depth 0, the bake camera's near plane (2 · depth
     in front of the cell)."""
-    grass = SMALL.replace("plants_per_cell = 16", "plants_per_cell = 64") + "grid_x = 4\ngrid_z = 4\n"
+    grass = DENSE + "grid_x = 4\ngrid_z = 4\n"
     app = _app(tmp_path, grass, _camera((0.0, 30.0, 0.0)), terrain=False)
-    renderer = make_renderer(app, 32, 24)
-    try:
-        app.step(1)
-        app.render_frame()
-        gpu = next(iter(_feature(app).fields.values()))
+    with rendered(app, 32, 24) as renderer:
+        gpu = _gpu(app)
         gpu.ensure_impostors()
         w, h = gpu.layout.size
         assert w % 2 or (w // 2) % 2 or h % 2 or (h // 2) % 2  # the layout this test is about: an odd level
@@ -563,9 +512,6 @@ def test_the_depth_images_mip_levels_cover_what_the_colours_alpha_test_passes(tm
             assert not (passes & (depth[..., 1] <= 0.0)).any(), level
             box = base[:lh * k, :lw * k].reshape(lh, k, lw, k, 2).mean(axis=(1, 3))
             np.testing.assert_allclose(depth[passes], box[passes], atol=2e-3, rtol=2e-3)
-    finally:
-        renderer.release()
-        app.renderer = None
 
 
 @pytest.mark.parametrize("blend", [False, True])
@@ -576,7 +522,7 @@ def test_the_rectangles_grass_depth_lies_behind_the_rectangle(tmp_path, monkeypa
     and wrote a point twice the cell's depth in front of it (up to 95 m in front of the rectangle)."""
     from systems.grass_field.render import FieldGpu
 
-    grass = SMALL.replace("plants_per_cell = 16", "plants_per_cell = 64") + "grid_x = 8\ngrid_z = 8\n"
+    grass = DENSE + "grid_x = 8\ngrid_z = 8\n"
     grass += "blend_views = true\n" if blend else ""
     captured, original = {}, FieldGpu.draw
 
@@ -593,20 +539,14 @@ def test_the_rectangles_grass_depth_lies_behind_the_rectangle(tmp_path, monkeypa
         app.config.render.fog_density = 0.0
         app.config.render.shadows = False
         _walled(app, 0.0)
-        renderer = make_renderer(app, 320, 240)
-        try:
-            app.step(1)
-            app.render_frame()
-            gpu = next(iter(_feature(app).fields.values()))
+        with rendered(app, 320, 240) as renderer:
+            gpu = _gpu(app)
             gpu.grass_depth = grass_depth
             app.render_frame()
-            plan = next(iter(_feature(app).plans.values()))
+            plan = _plan(app)
             assert len(plan.impostor_cells) > 20 and sum(len(p) for p in plan.plants) == 0
             if blend:
                 assert (plan.impostor_blend > 0.5).sum() > 5
-        finally:
-            renderer.release()
-            app.renderer = None
         p = captured["proj"]
         distance[grass_depth] = p[2, 3] / (2.0 * captured["depth"].astype(np.float64) - 1.0 + p[2, 2])  # eye -z
     grass_pixels = distance[False] < distance[True] - 1.0
