@@ -2,7 +2,7 @@
 breakdown from the profiler (CPU time with a GL finish per pass, which is exact on llvmpipe), and the
 simulation tick time.  Target: >= 30 fps on llvmpipe.
 
-Three loops are timed:
+Three loops are timed (the last twice):
 
 * one fixed tick, then the frame (serial);
 * the tick overlapped with the frame's rasterisation (``[render] overlap_ticks``);
@@ -10,7 +10,9 @@ Three loops are timed:
   frame, so the fixed 60 Hz clock runs as many ticks as that time holds (below 60 fps, more than one a frame).
   This is the frame rate a player sees.  It also prints the CPU time per frame of the main thread (Python, the
   simulation, the driver's vertex work and binning) and of the other threads (llvmpipe's rasteriser threads):
-  on a 2-core machine their sum over two is the floor of the frame time.
+  on a 2-core machine their sum over two is the floor of the frame time.  It runs at the set render scale, then
+  again with ``[render] dynamic_resolution`` as the demo's window has it (the render scale lowered while frames
+  miss 30 fps), with the share of frames drawn at each scale.
 
 Then the per-pass breakdown of a frame, where the main thread blocks, and last the tick by system (CPU time of
 each).
@@ -85,7 +87,14 @@ def main(width: int = 1280, height: int = 720, warmup: int = 30, frames: int = 6
     print(row("whole frame", overlapped))
     print(f"    -> {1e3 / statistics.fmean(overlapped):5.1f} fps mean, {1e3 / statistics.median(overlapped):5.1f} fps "
           f"median (target >= 30 fps; on a shared machine the median is the steadier figure)")
+    dynamic = app.config.render.dynamic_resolution
+    app.config.render.dynamic_resolution = False
     realtime_loop(app, ctx, frames)
+    if dynamic:  # as the window runs the demo: the render scale follows the frame time ([render] dynamic_resolution)
+        app.config.render.dynamic_resolution = True
+        realtime_loop(app, ctx, frames + 30, dynamic=True)
+        app.config.render.dynamic_resolution = False  # the breakdown below at the set scale
+        app.renderer.resolution.reset()
     renderer.timer.enabled, renderer.timer.gpu = True, False  # breakdown: a GL finish after every pass
     renderer.timer.reset()
     for _ in range(frames // 2):
@@ -146,11 +155,20 @@ def _cpu_ns() -> tuple[int, int]:
     return main, others
 
 
-def realtime_loop(app: App, ctx, frames: int) -> None:
-    """The window's loop: ``advance`` with the previous frame's measured length (see the module docstring)."""
+def realtime_loop(app: App, ctx, frames: int, dynamic: bool = False) -> None:
+    """The window's loop: ``advance`` with the previous frame's measured length (see the module docstring).
+    ``dynamic``: with ``[render] dynamic_resolution`` on, the render scale each frame was drawn at is reported too
+    (the first 30 frames let it settle and are not counted)."""
     ctx.finish()
-    times, ticks = [], []
+    times, ticks, scales = [], [], []
     last = 1.0 / 60.0
+    settle = 30 if dynamic else 0
+    for _ in range(settle):
+        t = time.perf_counter()
+        app.advance(last)
+        ctx.finish()
+        last = time.perf_counter() - t
+    frames -= settle
     cpu0, t0 = _cpu_ns(), time.perf_counter()
     for _ in range(frames):
         t = time.perf_counter()
@@ -158,10 +176,18 @@ def realtime_loop(app: App, ctx, frames: int) -> None:
         ctx.finish()
         last = time.perf_counter() - t
         times.append(last * 1e3)
+        scales.append(app.renderer.render_scale)
     wall, cpu1 = time.perf_counter() - t0, _cpu_ns()
     main_ms, other_ms = ((b - a) / 1e6 / frames for a, b in zip(cpu0, cpu1))
-    print(f"  real-time loop (advance with the measured frame time, fixed step {app.dt * 1e3:.2f} ms; as the window "
-          f"runs it):")
+    if dynamic:
+        shares = ", ".join(f"{scale:.2f}: {scales.count(scale) / len(scales):.0%}"
+                           for scale in sorted(set(scales), reverse=True))
+        print(f"  real-time loop with dynamic resolution (target {app.config.render.target_fps:g} fps, render "
+              f"scale down to {app.config.render.min_render_scale:g}; after {settle} frames to settle), frames at "
+              f"each scale: {shares}")
+    else:
+        print(f"  real-time loop (advance with the measured frame time, fixed step {app.dt * 1e3:.2f} ms; as the "
+              f"window runs it; at the set render scale):")
     print(f"  {'frame':<22s} mean {statistics.fmean(times):7.2f}  median {statistics.median(times):7.2f}  "
           f"best {min(times):7.2f} ms, {statistics.fmean(ticks):.2f} ticks a frame")
     print(f"    -> {frames / wall:5.1f} fps (frames / wall time)")

@@ -184,6 +184,8 @@ class App:
         its ticks run (:meth:`render_frame` ``overlap``): one frame more latency, the CPU and the GPU busy at
         once.  Otherwise the ticks run first, then the frame draws their result."""
         steps = self.clock.advance(real_dt)
+        if self.renderer is not None:
+            self.renderer.frame_time(real_dt)  # [render] dynamic_resolution follows the measured frame length
         if self.renderer is not None and self.config.render.overlap_ticks:
             self.render_frame(overlap=lambda: self.step(steps))
         else:

@@ -69,6 +69,16 @@ class RenderSettings(ConfigModel):
         None, ge=0.25, le=1.0, description="render_scale on a software rasteriser (llvmpipe, where the fill rate is "
                                            "the limit), so that a scene draws at full size on a GPU and at a "
                                            "fraction on the CPU. Unset: render_scale everywhere.")
+    dynamic_resolution: bool = Field(
+        False, description="In a window's real-time loop, lower the 3D views' render scale (down to "
+                           "min_render_scale) while frames take longer than 1 / target_fps, and raise it back "
+                           "towards render_scale (or software_render_scale) when they are well under; it never "
+                           "draws above the set scale. Fixed-step runs, screenshots and tests draw at the set scale.")
+    target_fps: float = Field(30.0, ge=5.0, le=240.0,
+                              description="The frame rate dynamic_resolution holds (frames a second).")
+    min_render_scale: float = Field(0.35, ge=0.25, le=1.0,
+                                    description="The lowest render scale dynamic_resolution goes to (it stays at "
+                                                "the set scale when that is lower).")
     overlap_ticks: bool = Field(True, description="In a window, run each frame's simulation ticks while the GPU "
                                                   "draws the previous state (one frame more latency; a software "
                                                   "rasteriser then draws on its threads while Python simulates). "

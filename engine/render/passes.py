@@ -898,7 +898,10 @@ class HudFeature(RenderFeature):
         if self.renderer.show_profiler:
             t = self.renderer.timer
             rows = [f"{name:<28s}{ms:7.2f} ms" for name, ms in sorted(t.last.items(), key=lambda kv: -kv[1])[:14]]
-            items.append(("top_right", ("profiler (F3)", *rows), 13))
+            scale = f"render scale {self.renderer.render_scale:.2f}"
+            if self.renderer.settings.dynamic_resolution:
+                scale += f" (dynamic, {self.renderer.settings.target_fps:g} fps)"
+            items.append(("top_right", ("profiler (F3)", scale, *rows), 13))
         return items
 
     def _texture(self, lines: tuple, size: int, color=(255, 255, 255)) -> moderngl.Texture:

@@ -24,6 +24,7 @@ import numpy as np
 from engine.render.components import Camera, Hud, look_at, projection, view_matrix, viewport_pixels
 from engine.render.feature import OVERLAY, SKY, ColorLayer, RenderFeature, View
 from engine.render.graph import RenderGraph, ResourcePool, TextureDesc
+from engine.render.resolution import DynamicResolution
 from engine.render.shadows import Shadow, fit_light, light_basis, light_boxes
 from engine.spatial import Transform
 
@@ -215,6 +216,8 @@ class Renderer:
         self.app = app
         self.ctx = ctx
         self.screen = screen
+        self.resolution = DynamicResolution()  # [render] dynamic_resolution: see frame_time
+        self._scale_changed = False
         self.use_settings(app.config.render)
         self.width, self.height = int(width), int(height)
         self.time = 0.0
@@ -427,16 +430,39 @@ class Renderer:
         """Draw with ``[render]`` settings (engine.scene.RenderSettings; a hot reload passes the new ones): most
         are read every frame; the light is derived here."""
         self.settings = settings
+        self.resolution.reset()  # a new target frame rate or scale range: start again from the set scale
         self.sun_direction = _unit(np.array(settings.sun_direction, float)).astype(np.float32)
         self.sun_color = np.array(settings.sun_color, np.float32)
         self.ambient = float(settings.ambient)
 
     @property
-    def render_scale(self) -> float:
-        """The fraction of their window size the views render at: the render settings' ``render_scale``, or
-        ``software_render_scale`` on a software rasteriser when the scene sets one."""
+    def set_render_scale(self) -> float:
+        """The render settings' ``render_scale``, or ``software_render_scale`` on a software rasteriser when the
+        scene sets one."""
         software_scale = self.settings.software_render_scale
         return software_scale if self.software and software_scale is not None else self.settings.render_scale
+
+    @property
+    def render_scale(self) -> float:
+        """The fraction of their window size the views render at: :attr:`set_render_scale`, or less while
+        ``[render] dynamic_resolution`` lowers it (:meth:`frame_time`)."""
+        scale = self.set_render_scale
+        lowered = self.resolution.scale
+        return scale if lowered is None or not self.settings.dynamic_resolution else min(lowered, scale)
+
+    def frame_time(self, seconds: float) -> None:
+        """The real-time loop's measured length of the last frame (:meth:`engine.app.App.advance`).  With
+        ``[render] dynamic_resolution`` the next frames' render scale follows it (engine/render/resolution.py):
+        lowered while frames miss ``1 / target_fps``, raised back when the set scale would hold it."""
+        s = self.settings
+        if not s.dynamic_resolution:
+            self.resolution.reset()
+            return
+        high = self.set_render_scale
+        before = self.render_scale
+        self.resolution.update(seconds, 1.0 / s.target_fps, min(s.min_render_scale, high), high)
+        if self.render_scale != before:  # the old size's targets go as soon as they are free (as on a resize)
+            self._scale_changed = True
 
     @property
     def antialiasing(self) -> bool:
@@ -571,6 +597,9 @@ class Renderer:
         only what render-extract copied, so the picture is the same as when the ticks run after the frame.
         """
         self.timer.last = {}  # this frame's passes only (pass names carry entity ids: despawned ones go)
+        if self._scale_changed:  # dynamic resolution changed the views' size: free the old size's targets
+            self._scale_changed = False
+            self.graph.pool.clear()
         if overlap is None:
             self.declare().execute()
         else:
