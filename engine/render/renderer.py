@@ -217,7 +217,7 @@ class Renderer:
         self.ctx = ctx
         self.screen = screen
         self.resolution = DynamicResolution()  # [render] dynamic_resolution: see frame_time
-        self._scale_changed = False
+        self._drawn_scale: float | None = None  # the render scale of the last frame drawn (see draw)
         self.use_settings(app.config.render)
         self.width, self.height = int(width), int(height)
         self.time = 0.0
@@ -459,10 +459,7 @@ class Renderer:
             self.resolution.reset()
             return
         high = self.set_render_scale
-        before = self.render_scale
         self.resolution.update(seconds, 1.0 / s.target_fps, min(s.min_render_scale, high), high)
-        if self.render_scale != before:  # the old size's targets go as soon as they are free (as on a resize)
-            self._scale_changed = True
 
     @property
     def antialiasing(self) -> bool:
@@ -597,9 +594,12 @@ class Renderer:
         only what render-extract copied, so the picture is the same as when the ticks run after the frame.
         """
         self.timer.last = {}  # this frame's passes only (pass names carry entity ids: despawned ones go)
-        if self._scale_changed:  # dynamic resolution changed the views' size: free the old size's targets
-            self._scale_changed = False
+        # a new render scale (dynamic resolution, or back to the set scale: new settings, the setting turned off):
+        # the old size's targets are freed, as on a resize (nothing is checked out between frames)
+        scale = self.render_scale
+        if self._drawn_scale is not None and scale != self._drawn_scale:
             self.graph.pool.clear()
+        self._drawn_scale = scale
         if overlap is None:
             self.declare().execute()
         else:

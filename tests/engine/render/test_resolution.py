@@ -139,3 +139,33 @@ def test_fixed_step_frames_and_the_setting_off_keep_the_set_scale():
     finally:
         renderer.release()
         app.renderer = None
+
+
+def _free_sizes(renderer) -> set[tuple[int, int]]:
+    return {(desc.width, desc.height) for desc in renderer.graph.pool._free if isinstance(desc, TextureDesc)}
+
+
+@pytest.mark.parametrize("back", ["new settings", "turned off"])
+def test_the_lowered_size_targets_are_freed_when_the_scale_goes_back_up_without_the_controller(back):
+    """The scale goes back to the set one through a hot reload (use_settings forgets the lowered scale) or the
+    setting turned off: the targets of the lowered size are freed as on any other change of size.  Before, only a
+    change that frame_time made cleared the pool, and the 56 x 34 targets stayed in it for good."""
+    app = App(SCENE)
+    app.config.render.dynamic_resolution = True
+    renderer = make_renderer(app, 160, 96)
+    try:
+        for _ in range(40):
+            app.advance(0.1)
+        lowered = _free_sizes(renderer)  # the view's targets at 56 x 34, the energy wave's at half and a quarter
+        assert renderer.views[0].width == 56 and (56, 34) in lowered
+        if back == "new settings":
+            renderer.use_settings(app.config.render)
+            app.render_frame()
+        else:
+            app.config.render.dynamic_resolution = False
+            app.advance(0.1)
+        assert renderer.views[0].width == 160
+        assert (160, 96) in _free_sizes(renderer) and not lowered & _free_sizes(renderer), _free_sizes(renderer)
+    finally:
+        renderer.release()
+        app.renderer = None
