@@ -177,15 +177,19 @@ class App:
         if n > 0:
             self._run_stage(Stage.FRAME_UPDATE)
 
-    def advance(self, real_dt: float) -> int:
+    def advance(self, real_dt: float, busy: float | None = None) -> int:
         """One frame: the ticks the accumulator allows and rendering. Returns the ticks run.
+
+        ``busy``: how long the last frame's own work took, when the loop knows it apart from ``real_dt`` (a window
+        with vsync, whose frame interval is rounded up to the display's refresh): what ``[render]
+        dynamic_resolution`` judges (:meth:`engine.render.renderer.Renderer.frame_time`); else ``real_dt``.
 
         With ``[render] overlap_ticks`` (the default) the frame draws the state the previous frame left while
         its ticks run (:meth:`render_frame` ``overlap``): one frame more latency, the CPU and the GPU busy at
         once.  Otherwise the ticks run first, then the frame draws their result."""
         steps = self.clock.advance(real_dt)
         if self.renderer is not None:
-            self.renderer.frame_time(real_dt)  # [render] dynamic_resolution follows the measured frame length
+            self.renderer.frame_time(real_dt if busy is None else busy)  # [render] dynamic_resolution
         if self.renderer is not None and self.config.render.overlap_ticks:
             self.render_frame(overlap=lambda: self.step(steps))
         else:

@@ -137,7 +137,7 @@ def _run_window(app: App, size, steps, every, last, profile: bool) -> None:
     renderer = Renderer(app, ctx, *window.get_framebuffer_size(), screen=ctx.detect_framebuffer())
     renderer.timer.enabled = profile
     queue = app.world.resource(InputQueue)
-    state = {"frames": 0, "last": time.perf_counter(), "poll": 0.0}
+    state = {"frames": 0, "last": time.perf_counter(), "poll": 0.0, "busy": None}
     reloader = _reloader(app)
     attach_window_input(window, queue, renderer, reloader)
 
@@ -158,7 +158,15 @@ def _run_window(app: App, size, steps, every, last, profile: bool) -> None:
             app.step(1)
             app.render_frame()
         else:
-            app.advance(dt)
+            app.advance(dt, busy=state["busy"])
+            if app.config.render.dynamic_resolution and app.config.render.vsync:
+                # with vsync the interval between frames is rounded up to the display's refresh, which hides the
+                # headroom dynamic resolution needs to see: it judges the frame's own length, its drawing finished
+                # before the swap waits (engine/render/resolution.py)
+                ctx.finish()
+                state["busy"] = time.perf_counter() - now
+            else:
+                state["busy"] = None
         state["frames"] += 1
         if every and state["frames"] % every[0] == 0:
             renderer.save_screenshot(every[1] / f"frame_{state['frames']:05d}.png")

@@ -40,6 +40,12 @@ _SOFTWARE_RASTERISERS = ("llvmpipe", "softpipe", "swrast", "swiftshader", "softw
 HDR_FORMAT = "rgba16f"  # every view's HDR colour target and its kept static layer (rgba32f: demo 49.4 -> 51.6 ms)
 
 
+# the [render] settings dynamic resolution depends on: a hot reload that changes one of them starts it again from the
+# set scale; one that changes others (fog, sky colours) keeps the scale it found
+_RESOLUTION_SETTINGS = ("dynamic_resolution", "target_fps", "min_render_scale", "render_scale",
+                        "software_render_scale")
+
+
 def _find_gl_flush() -> Callable[[], None]:
     """glFlush of the current context (moderngl has glFinish only).  A flush hands the queued commands to the
     GPU without waiting; llvmpipe starts rasterising them on its threads.  Without a GL library to call into,
@@ -429,8 +435,9 @@ class Renderer:
     def use_settings(self, settings) -> None:
         """Draw with ``[render]`` settings (engine.scene.RenderSettings; a hot reload passes the new ones): most
         are read every frame; the light is derived here."""
-        self.settings = settings
-        self.resolution.reset()  # a new target frame rate or scale range: start again from the set scale
+        old, self.settings = getattr(self, "settings", None), settings
+        if old is None or any(getattr(old, key) != getattr(settings, key) for key in _RESOLUTION_SETTINGS):
+            self.resolution.reset()  # a new target frame rate or scale range: start again from the set scale
         self.sun_direction = _unit(np.array(settings.sun_direction, float)).astype(np.float32)
         self.sun_color = np.array(settings.sun_color, np.float32)
         self.ambient = float(settings.ambient)

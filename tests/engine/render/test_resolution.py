@@ -55,6 +55,40 @@ def test_a_pixel_bound_frame_settles_at_a_scale_that_holds_the_target_without_sw
     assert from_bottom.changes == 1
 
 
+def test_after_a_heavy_moment_the_scale_climbs_back_to_the_set_scale():
+    """The demo's curve (17.1 ms fixed plus 50.2 ms · scale², fitted to the real-time loop at 0.35 and 0.5): 0.5
+    holds 30 fps (29.7 ms).  A stretch 12 ms heavier drops the scale to the minimum; once it is over the scale
+    climbs back step by step (the slope measured between two scales) and stays at 0.5.  With the slope taken
+    as the whole frame it stayed at 0.35 for good: 23.2 ms there, and 0.4 predicted at 30.3 ms."""
+    rng = np.random.default_rng(7)
+
+    def cost(scale, i):
+        heavy = 0.012 if 100 <= i < 160 else 0.0
+        return (0.0171 + 0.0502 * scale * scale + heavy) * (1.0 + rng.uniform(-0.02, 0.02))
+
+    controller = DynamicResolution()
+    scales = _run(controller, cost, 600)
+    assert set(scales[:100]) == {0.5}
+    assert min(scales[100:200]) == 0.35
+    assert scales[-300:] == [0.5] * 300
+    assert controller.changes <= 8
+
+
+def test_a_raise_that_does_not_hold_waits_longer_each_time():
+    """A cliff the model cannot see: 20 ms a frame up to 0.4, 40 ms above it.  Measured at 0.35 and 0.4 alike,
+    the slope is 0 and 0.45 looks free; each raise is taken back by the next decision, and the wait before the
+    next try doubles, so the frames at 0.45 stay a small share."""
+    controller = DynamicResolution()
+    controller.scale = 0.35
+    scales = _run(controller, lambda scale, i: 0.040 if scale > 0.4 else 0.020, 3000)
+    raises = [i for i, (a, b) in enumerate(zip(scales, scales[1:])) if b > a and b == 0.45]
+    gaps = np.diff(raises)
+    assert len(raises) >= 4 and all(np.diff(gaps) >= 0) and gaps[-1] >= 700  # doubling up to 64 windows
+    assert gaps[3] > 4 * gaps[0]  # 38, 62, 110, 206, 398, 782, 782 frames between tries
+    assert scales.count(0.45) / len(scales) < 0.05
+    assert scales[-1] == 0.4
+
+
 def test_fast_frames_raise_the_scale_back_but_never_above_the_set_scale():
     controller = DynamicResolution()
     controller.scale = 0.35
@@ -116,7 +150,7 @@ def test_the_real_time_loop_lowers_the_views_when_frames_are_slow_and_the_state_
     assert all(w <= 56 for w, _ in sizes), sizes
 
 
-def test_fixed_step_frames_and_the_setting_off_keep_the_set_scale():
+def test_fixed_step_frames_new_settings_and_the_setting_off_keep_the_set_scale():
     app = App(SCENE)
     app.config.render.dynamic_resolution = True
     renderer = make_renderer(app, 160, 96)
@@ -128,12 +162,16 @@ def test_fixed_step_frames_and_the_setting_off_keep_the_set_scale():
         for _ in range(20):
             app.advance(0.1)
         assert renderer.views[0].width < 160
-        renderer.use_settings(app.config.render)  # new settings (a hot reload): back to the set scale
+        fog = app.config.render.model_copy(update={"fog_density": 0.01})
+        renderer.use_settings(fog)  # a hot reload of other settings keeps the scale found
+        app.render_frame()
+        assert renderer.views[0].width < 160
+        renderer.use_settings(fog.model_copy(update={"target_fps": 20.0}))  # a new target: from the set scale
         app.render_frame()
         assert renderer.views[0].width == 160
         for _ in range(20):
             app.advance(0.1)
-        app.config.render.dynamic_resolution = False  # turned off: the set scale from the next frame on
+        renderer.settings.dynamic_resolution = False  # turned off: the set scale from the next frame on
         app.advance(0.1)
         assert renderer.views[0].width == 160
     finally:
@@ -159,7 +197,7 @@ def test_the_lowered_size_targets_are_freed_when_the_scale_goes_back_up_without_
         lowered = _free_sizes(renderer)  # the view's targets at 56 x 34, the energy wave's at half and a quarter
         assert renderer.views[0].width == 56 and (56, 34) in lowered
         if back == "new settings":
-            renderer.use_settings(app.config.render)
+            renderer.use_settings(app.config.render.model_copy(update={"target_fps": 20.0}))
             app.render_frame()
         else:
             app.config.render.dynamic_resolution = False

@@ -94,3 +94,44 @@ def test_window_events_become_engine_input_events(display):
                           ("key_down", "f3", 0.0, 0.0, 0.0, 0.0), ("button_down", "left", 10, 20, 0.0, 0.0),
                           ("mouse_move", "", 15, 22, 5, 2), ("key_up", "w", 0.0, 0.0, 0.0, 0.0)])
     assert profiler == "profiler True"
+
+
+DYNAMIC = r"""
+import pyglet
+from engine.app import App
+from engine.render import frontend
+from engine.render.renderer import Renderer
+
+fed, scales = [], []
+frame_time = Renderer.frame_time
+
+
+def recording(self, seconds):
+    fed.append(seconds)
+    frame_time(self, seconds)
+    scales.append(self.render_scale)
+
+
+Renderer.frame_time = recording
+app = App("configs/scenes/sandbox.toml")
+render = app.config.render
+render.dynamic_resolution, render.vsync, render.target_fps, render.min_render_scale = True, True, 240.0, 0.5
+pyglet.clock.schedule_once(lambda dt: pyglet.app.exit(), 4.0)
+frontend._run_window(app, (640, 400), None, None, None, False)
+print("frames", len(fed), "first", fed[0], "busy", all(s is not None and s > 0 for s in fed[1:]))
+print("scales", scales[0], min(scales))
+"""
+
+
+def test_the_window_loop_feeds_dynamic_resolution_the_frames_own_length(display):
+    """The real-time window loop with vsync: dynamic resolution gets each frame's measured work (its drawing
+    finished before the swap), and an unreachable target (240 fps at 640 x 400 on llvmpipe) lowers the scale to
+    its minimum."""
+    env = dict(os.environ, DISPLAY=display)
+    res = subprocess.run([sys.executable, "-c", DYNAMIC], capture_output=True, text=True, cwd=ROOT, env=env,
+                         timeout=120)
+    assert res.returncode == 0, res.stderr[-2000:]
+    lines = res.stdout.strip().splitlines()
+    frames = lines[-2].split()
+    assert int(frames[1]) >= 20 and frames[-1] == "True", lines
+    assert lines[-1] == "scales 1.0 0.5", lines
