@@ -79,11 +79,11 @@ class DynamicResolution:
             self._blocked -= 1
         if self._skip:
             self._skip -= 1
-            return self._keep(current, high)
+            return self._keep(current, low, high)
         if math.isfinite(frame_seconds) and frame_seconds >= 0.0:
             self._times.append(frame_seconds)
         if len(self._times) < self.window:
-            return self._keep(current, high)
+            return self._keep(current, low, high)
         median = statistics.median(self._times)
         self._measure(current, median)
         new = current
@@ -105,7 +105,7 @@ class DynamicResolution:
             self.changes += 1
             self._times.clear()
             self._skip = self.settle
-        return self._keep(new, high)
+        return self._keep(new, low, high)
 
     def _measure(self, scale: float, median: float) -> None:
         """Keep the latest median of this scale and of the scale measured before it."""
@@ -123,8 +123,9 @@ class DynamicResolution:
         (s0, m0), (s1, m1) = self._measured
         return min(max((m1 - m0) / (s1 * s1 - s0 * s0), 0.0), most)
 
-    def _keep(self, scale: float, high: float) -> float:
-        scale = round(scale, 6)
+    def _keep(self, scale: float, low: float, high: float) -> float:
+        # grid steps without float dust, and the bounds exactly (an off-grid set scale such as 0.47 stays 0.47)
+        scale = high if scale >= high - 1e-6 else low if scale <= low + 1e-6 else round(scale, 6)
         self.scale = None if scale >= high else scale
         return scale
 

@@ -207,3 +207,33 @@ def test_the_lowered_size_targets_are_freed_when_the_scale_goes_back_up_without_
     finally:
         renderer.release()
         app.renderer = None
+
+
+def test_random_bounds_and_frame_times_keep_the_scale_in_range_and_on_the_grid():
+    """Off-grid bounds (the set scale 0.4511453 must come back as itself, not 0.451145), NaN, inf, negative and
+    huge frame times: the scale stays within [low, high], on the 0.05 grid or at a bound."""
+    rng = np.random.default_rng(1)
+    for _ in range(150):
+        controller = DynamicResolution()
+        low = float(rng.uniform(0.25, 0.6))
+        high = float(rng.uniform(low, 1.0))
+        fixed, pixels = rng.uniform(0.0, 0.04), rng.uniform(0.0, 0.1)
+        scale = high
+        for _ in range(300):
+            seconds = (fixed + pixels * scale * scale) * rng.uniform(0.8, 1.2)
+            if rng.random() < 0.03:
+                seconds = float(rng.choice([np.nan, np.inf, -1.0, 5.0]))
+            scale = controller.update(seconds, TARGET, low, high)
+            assert low <= scale <= high
+            assert scale in (low, high) or abs(scale / 0.05 - round(scale / 0.05)) < 1e-9, (scale, low, high)
+
+
+def test_random_pixel_bound_curves_settle():
+    """Frames of a + b · scale² with ±5 % noise, for 40 random curves: after the first 1000 frames the scale
+    changes at most once more (no swinging between two steps)."""
+    rng = np.random.default_rng(2)
+    for _ in range(40):
+        fixed, pixels = rng.uniform(0.005, 0.03), rng.uniform(0.02, 0.15)
+        scales = _run(DynamicResolution(), lambda s, i: (fixed + pixels * s * s) * rng.uniform(0.95, 1.05), 2000)
+        late = scales[1000:]
+        assert sum(1 for a, b in zip(late, late[1:]) if a != b) <= 1, (fixed, pixels)
