@@ -9,6 +9,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 from functools import lru_cache
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import moderngl
@@ -31,6 +32,18 @@ SHADERS = __import__("pathlib").Path(__file__).parent / "shaders"
 
 def builtin_features():
     return [SkyFeature, TerrainFeature, MeshFeature, HudFeature]
+
+
+def current_vao(vao: moderngl.VertexArray | None, prog: moderngl.Program,
+                make: Callable[[moderngl.Program], moderngl.VertexArray]) -> moderngl.VertexArray:
+    """``vao`` when it was made on ``prog``, else ``make(prog)`` with the old one released.  Features keep their
+    vertex arrays across frames, and after F5 (:meth:`Renderer.reload_shaders`) ``load_program`` hands out a new
+    program: one made on the old program would keep drawing the old shader, and keep it alive."""
+    if vao is not None and vao.program is prog:
+        return vao
+    if vao is not None:
+        vao.release()
+    return make(prog)
 
 
 def set_uniforms(prog: moderngl.Program | moderngl.ComputeShader, **values: Any) -> None:
@@ -137,12 +150,7 @@ class SkyFeature(RenderFeature):
     def _vao(self, name: str) -> moderngl.VertexArray:
         """A buffer-less VAO over ``shaders/<name>``, remade when F5 reloaded the program."""
         prog = self.renderer.load_program(SHADERS, name)
-        vaos = self._vaos
-        vao = vaos.get(name)
-        if vao is None or vao.program is not prog:
-            if vao is not None:
-                vao.release()
-            vao = vaos[name] = self.ctx.vertex_array(prog, [])
+        vao = self._vaos[name] = current_vao(self._vaos.get(name), prog, lambda p: self.ctx.vertex_array(p, []))
         return vao
 
 
@@ -374,13 +382,9 @@ class TerrainFeature(RenderFeature):
                                      shade_scale=mesh.shade_scale, uv_scale=mesh.chunks.uv_scale,
                                      uv_offset=mesh.chunks.uv_offset)
                         variant = (vertex_shade, textured, shadows)
-                        vao = mesh.vaos.get(variant)
-                        if vao is None or vao.program is not prog:  # new, or its shader was reloaded (F5)
-                            if vao is not None:
-                                vao.release()
-                            vao = mesh.vaos[variant] = self.ctx.vertex_array(
-                                prog, [(mesh.vbo, "3f 3f 1f", "in_position", "in_normal", "in_skirt")], mesh.ibo,
-                                index_element_size=4)
+                        vao = mesh.vaos[variant] = current_vao(mesh.vaos.get(variant), prog, lambda p: (
+                            self.ctx.vertex_array(p, [(mesh.vbo, "3f 3f 1f", "in_position", "in_normal",
+                                                       "in_skirt")], mesh.ibo, index_element_size=4)))
                         for first, count in ranges:
                             vao.render(moderngl.TRIANGLES, vertices=count, first=first)
                         draws += len(ranges)
@@ -568,14 +572,10 @@ class MeshFeature(RenderFeature):
             self._instances[shape] = buf
         vaos, vbo, ibo = self._geometry_of(shape)
         prog = self.renderer.load_program(SHADERS, "mesh", defines)
-        built = vaos.get(defines)
-        if built is None or built.program is not prog:  # new, or its shader was edited and reloaded (F5)
-            if built is not None:
-                built.release()
-            built = vaos[defines] = self.ctx.vertex_array(prog, [(vbo, "3f 3f", "in_position", "in_normal"),
-                                                                 (buf, "4f 4f 4f 4f 4f/i", "m0", "m1", "m2", "m3",
-                                                                  "in_color")], ibo)
-        return built
+        vaos[defines] = current_vao(vaos.get(defines), prog, lambda p: self.ctx.vertex_array(
+            p, [(vbo, "3f 3f", "in_position", "in_normal"), (buf, "4f 4f 4f 4f 4f/i", "m0", "m1", "m2", "m3",
+                                                             "in_color")], ibo))
+        return vaos[defines]
 
     def _shadow_vao(self, shape: str, count: int) -> moderngl.VertexArray:
         """The shape's depth-only VAO over its shadow instance buffer (grown as needed)."""
@@ -587,12 +587,9 @@ class MeshFeature(RenderFeature):
                 self._shadow_vaos.pop(shape).release()
             buf = self._shadow_instances[shape] = self.ctx.buffer(reserve=max(needed, 64 * self.INSTANCE_FLOATS * 4))
         prog = self.renderer.load_program(SHADERS, "shadow_mesh")
-        if shape in self._shadow_vaos and self._shadow_vaos[shape].program is not prog:  # reloaded shader
-            self._shadow_vaos.pop(shape).release()
-        if shape not in self._shadow_vaos:
-            _, vbo, ibo = self._geometry_of(shape)
-            self._shadow_vaos[shape] = self.ctx.vertex_array(
-                prog, [(vbo, "3f 12x", "in_position"), (buf, "4f 4f 4f 4f 16x/i", "m0", "m1", "m2", "m3")], ibo)
+        _, vbo, ibo = self._geometry_of(shape)
+        self._shadow_vaos[shape] = current_vao(self._shadow_vaos.get(shape), prog, lambda p: self.ctx.vertex_array(
+            p, [(vbo, "3f 12x", "in_position"), (buf, "4f 4f 4f 4f 16x/i", "m0", "m1", "m2", "m3")], ibo))
         return self._shadow_vaos[shape]
 
     def add_passes(self, graph, view: View, data) -> None:
@@ -933,11 +930,7 @@ class HudFeature(RenderFeature):
             self.ctx.enable(moderngl.BLEND)
             self.ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
             prog = r.load_program(SHADERS, "sprite")
-            if self._vao is None or self._vao.program is not prog:  # new, or F5 reloaded the shader
-                if self._vao is not None:
-                    self._vao.release()
-                self._vao = self.ctx.vertex_array(prog, [])
-            vao = self._vao
+            vao = self._vao = current_vao(self._vao, prog, lambda p: self.ctx.vertex_array(p, []))
             for where, lines, size, *color in data:
                 tex = self._texture(lines, size, *color)
                 w, h = tex.size

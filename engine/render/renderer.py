@@ -308,8 +308,9 @@ class Renderer:
         uniforms).
 
         After :meth:`reload_shaders` this returns another program when the files changed: a feature that keeps a
-        vertex array made on the program checks ``vao.program is not prog`` before it draws and remakes it (the
-        old one released), or it keeps drawing the old shader, which then stays alive for it."""
+        vertex array made on the program passes it through :func:`engine.render.passes.current_vao` before it
+        draws (remade on the new program, the old one released), or it keeps drawing the old shader, which then
+        stays alive for it."""
         key = (str(directory), name, tuple(defines))
         prog = self._loaded.get(key)
         if prog is not None:

@@ -23,7 +23,7 @@ import numpy as np
 from components.toon_smoke import ToonSmokeState, ToonSmokeVolumeConfig
 from engine.render.feature import OPAQUE, RenderFeature, View
 from engine.render.graph import TextureDesc
-from engine.render.passes import display_to_hdr, primitive, set_uniforms
+from engine.render.passes import current_vao, display_to_hdr, primitive, set_uniforms
 from engine.spatial import Transform
 
 SHADERS = Path(__file__).parent / "shaders"
@@ -167,9 +167,9 @@ class ToonSmokeFeature(RenderFeature):
 
     def _upload(self, draw: VolumeDraw) -> _GpuMesh | None:
         gpu = self._meshes.get(draw.entity)
-        if gpu is not None and gpu.vao.program is not self._program():  # F5 reloaded the shader: remake its VAO
-            gpu.vao.release()
-            gpu.vao = self.ctx.vertex_array(self._program(), [(gpu.vbo, "3f 3f", "in_position", "in_normal")], gpu.ibo)
+        if gpu is not None:  # remade when F5 reloaded the shader
+            gpu.vao = current_vao(gpu.vao, self._program(), lambda p: self.ctx.vertex_array(
+                p, [(gpu.vbo, "3f 3f", "in_position", "in_normal")], gpu.ibo))
         if draw.mesh is None or (gpu is not None and gpu.version == draw.mesh_version):
             return gpu  # unchanged, or already uploaded for an earlier view this frame
         verts, indices = draw.mesh
@@ -204,11 +204,9 @@ class ToonSmokeFeature(RenderFeature):
         if self._sphere is None:
             verts, idx = primitive("sphere")
             self._sphere_buffers = (self.ctx.buffer(verts.tobytes()), self.ctx.buffer(idx.tobytes()))
-        if self._sphere is None or self._sphere.program is not self._program():  # new, or F5 reloaded the shader
-            if self._sphere is not None:
-                self._sphere.release()
-            vbo, ibo = self._sphere_buffers
-            self._sphere = self.ctx.vertex_array(self._program(), [(vbo, "3f 3f", "in_position", "in_normal")], ibo)
+        vbo, ibo = self._sphere_buffers
+        self._sphere = current_vao(self._sphere, self._program(), lambda p: self.ctx.vertex_array(
+            p, [(vbo, "3f 3f", "in_position", "in_normal")], ibo))  # new, or F5 reloaded the shader
         return self._sphere
 
     # ------------------------------------------------------------------- passes

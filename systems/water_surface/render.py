@@ -15,7 +15,7 @@ import numpy as np
 
 from components.water_surface import WaterState, WaterSurface
 from engine.render.feature import TRANSPARENT, RenderFeature, View
-from engine.render.passes import lighting_uniforms, set_uniforms
+from engine.render.passes import current_vao, lighting_uniforms, set_uniforms
 from engine.render.terrain_shadow import receiver as terrain_receiver
 from engine.spatial import Transform
 from systems.water_surface.kernels import vertex_records
@@ -119,11 +119,8 @@ class WaterFeature(RenderFeature):
             set_uniforms(water, **lights, **terrain_uniforms)
             for item in data:
                 buf = self._upload(item)
-                if buf.vao is None or buf.vao.program is not water:  # new buffers, another variant, or F5
-                    if buf.vao is not None:
-                        buf.vao.release()
-                    buf.vao = self.ctx.vertex_array(water, [(buf.vbo, "3f 3f", "in_position", "in_normal")],
-                                                    buf.ibo, 4)
+                buf.vao = current_vao(buf.vao, water, lambda p: self.ctx.vertex_array(  # another variant, F5
+                    p, [(buf.vbo, "3f 3f", "in_position", "in_normal")], buf.ibo, 4))
                 set_uniforms(water, shallow_color=item["shallow"], deep_color=item["deep"], clarity=item["clarity"],
                              floor_y=item["floor"], rest_y=item["rest"])
                 buf.vao.render(moderngl.TRIANGLES, vertices=len(item["indices"]))
