@@ -34,7 +34,8 @@ __all__ = ["impostor_basis", "TileFrame", "tile_frame", "tile_pixels", "tile_bou
            "Progress", "CACHE_FORMAT"]
 
 log = logging.getLogger("grass_field")
-CACHE_FORMAT = 3  # 2: level-3 shading with the specular power as squarings (plant.frag); 3: with the depth image
+CACHE_FORMAT = 4  # 2: level-3 shading with the specular power as squarings (plant.frag); 3: with the depth image;
+# 4: unlit (the albedo, and the normal beside the depth: impostor.frag lights each texel)
 ATLAS_PAD = 4  # texels around each tile (mip levels up to 2 stay inside their tile)
 ATLAS_MIP_LEVELS = 3
 
@@ -324,35 +325,33 @@ class DiskCache:
     def path(self, key: str) -> Path:
         return self.directory / f"grass_field_{key[:40]}.npz"
 
-    def load(self, key: str, shape: tuple[int, int, int],
-             depth_shape: tuple[int, int, int] | None = None) -> tuple[np.ndarray, np.ndarray | None] | None:
-        """(the colour atlas, uint8 ``shape``; its depth image, float16 ``depth_shape``, or None when not asked
-        for), or None when the file is missing, unreadable or holds other shapes."""
+    def load(self, key: str, shape: tuple[int, int, int], depth_shape: tuple[int, int, int],
+             normal_shape: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """(the colour atlas, uint8 ``shape``; its depth image, float16 ``depth_shape``; its normal image, uint8
+        ``normal_shape``), or None when the file is missing, unreadable or holds other shapes."""
         path = self.path(key)
         if not path.is_file():
             return None
         try:
             with np.load(path) as data:
-                atlas = data["atlas"]
-                depth = data["depth"] if depth_shape is not None and "depth" in data.files else None
+                found = [data[name] if name in data.files else None for name in ("atlas", "depth", "normal")]
                 stored = str(data["key"])
         except (OSError, ValueError, KeyError) as exc:
             log.warning("grass_field: ignoring unreadable cache %s (%s)", path, exc)
             return None
-        if stored != key or atlas.shape != shape or atlas.dtype != np.uint8:
+        if stored != key:
             return None
-        if depth_shape is not None and (depth is None or depth.shape != depth_shape or depth.dtype != np.float16):
-            return None  # stored without it (an older format) or for another layout: bake again
-        return atlas, depth
+        for array, want, dtype in zip(found, (shape, depth_shape, normal_shape), (np.uint8, np.float16, np.uint8)):
+            if array is None or array.shape != want or array.dtype != dtype:
+                return None  # stored without it (an older format) or for another layout: bake again
+        atlas, depth, normal = found
+        return atlas, depth, normal
 
-    def store(self, key: str, atlas: np.ndarray, depth: np.ndarray | None = None) -> Path:
+    def store(self, key: str, atlas: np.ndarray, depth: np.ndarray, normal: np.ndarray) -> Path:
         self.directory.mkdir(parents=True, exist_ok=True)
         path = self.path(key)
         tmp = path.with_suffix(f".tmp{os.getpid()}.npz")
-        arrays = dict(atlas=atlas, key=np.array(key))
-        if depth is not None:
-            arrays["depth"] = depth
-        np.savez_compressed(tmp, **arrays)
+        np.savez_compressed(tmp, atlas=atlas, depth=depth, normal=normal, key=np.array(key))
         os.replace(tmp, path)
         return path
 

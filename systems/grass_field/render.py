@@ -53,12 +53,30 @@ __all__ = ["GrassFieldFeature", "FieldGpu", "FieldFrame"]
 log = logging.getLogger("grass_field")
 SHADERS = Path(__file__).parent / "shaders"
 TEXTURE_WIDTH = 4096
-IMPOSTOR_FLOATS = 9  # centre (3), facing, two views, blend weight, level, the cell's relief
+IMPOSTOR_FLOATS = 10  # centre (3), facing, two views, blend weight, level, the cell's relief, its quarter turns
 # draw group (geometry.DRAW_GROUPS) -> (primitive mode, back faces culled): the closed tubes' faces turned away from
 # the eye are hidden by those turned towards it, so half their triangles never reach the rasteriser
 GROUP_DRAWS = {"tubes": (moderngl.TRIANGLES, True), "leaves": (moderngl.TRIANGLES, False),
                "lines": (moderngl.LINES, False), "points": (moderngl.POINTS, False)}
 COMMAND_WORDS = 5  # an indexed indirect command: count, instance count, first index, base vertex, base instance
+
+
+# how far the light may stray from the one a band was captured with before the band is captured again: the sun's
+# direction by this angle (degrees), its colour, the ambient light and the sky colours by this share
+BAND_LIGHT_TOLERANCE = (1.0, 0.02)
+
+
+def light_close(a: tuple, b: tuple, tolerance: tuple[float, float] = BAND_LIGHT_TOLERANCE) -> bool:
+    """Whether lights ``a`` and ``b`` (FieldGpu._light: sun direction, sun colour, ambient, sky colours) are within
+    ``tolerance`` (degrees between the suns, the largest relative change of a colour or the ambient light)."""
+    da, db = np.asarray(a[0], np.float64), np.asarray(b[0], np.float64)
+    cos = float(da @ db) / max(float(np.linalg.norm(da) * np.linalg.norm(db)), 1e-12)
+    if cos < np.cos(np.radians(tolerance[0])):
+        return False
+    for x, y in zip((*a[1], a[2], *a[3]), (*b[1], b[2], *b[3])):
+        if abs(x - y) > tolerance[1] * max(abs(x), abs(y), 1e-3):
+            return False
+    return True
 
 
 def _with_defines(source: str, defines: tuple[str, ...]) -> str:
@@ -147,8 +165,9 @@ class FieldGpu:
         self.plant_records = plant_records(placed.plant_position, placed.plant_yaw, placed.plant_scale,
                                            placed.plant_tint)
         self.plant_variant = np.asarray(placed.plant_variant, np.int64)
-        # what the lighting of the cached images (levels 4 and 5) and the plants' terrain shadow were made for:
-        # a hot reload of the sun or the sky re-bakes the images; a new terrain shadow re-takes the plants' share
+        # the light the band's images (level 5) were captured with, and the terrain shadow the plants' share of the
+        # sun was taken from: a new light re-captures the bands once it strays past BAND_LIGHT_TOLERANCE; a new
+        # terrain shadow re-takes the plants' share (the level-4 images are unlit: nothing to do for them)
         self._light_key: tuple | None = None
         self._terrain_key: Any = None
         self.cell_capacity = max(1, placed.cell_count)
@@ -180,6 +199,10 @@ class FieldGpu:
         # beside it, the depth of each texel's grass in its cached view (plant.frag's ATLAS_DEPTH: window depth ·
         # coverage, coverage; rg16f, mip levels box-filtered): where the sun's shadow map is looked up
         self.atlas_depth: moderngl.Texture | None = None
+        # and the normal of each texel's grass (its layout's frame; rgba8 (normal / 2 + 1 / 2, normal.y^2) ·
+        # coverage, mip levels box-filtered, the coverage the depth image's): the images are unlit, impostor.frag
+        # lights them with the frame's light
+        self.atlas_normal: moderngl.Texture | None = None
         self.bounds_tex: moderngl.Texture | None = None
         self.baked_views = 0  # cached views rendered (each view of each layout once, unless loaded from disk)
         self.loaded_from_disk = False
@@ -252,8 +275,9 @@ class FieldGpu:
                                             index_buffer=self.mesh_ibo[level], index_element_size=4)
             elif what[0] == "impostor":  # i_level feeds only the debug view, i_relief GRASS_DEPTH: absent from
                 # the other variants
-                vao = self.ctx.vertex_array(prog, [(what[1], "3f 1f 2f 1f 1f 1f /i", "i_centre", "i_face",
-                                                    "i_tiles", "i_blend", "i_level", "i_relief")], skip_errors=True)
+                vao = self.ctx.vertex_array(prog, [(what[1], "3f 1f 2f 1f 1f 1f 1f /i", "i_centre", "i_face",
+                                                    "i_tiles", "i_blend", "i_level", "i_relief", "i_turn")],
+                                            skip_errors=True)
             else:
                 vao = self.ctx.vertex_array(prog, [(self.band_buf, "3f 2f", "in_position", "in_uv")])
             self._vaos[key] = vao
@@ -379,13 +403,16 @@ class FieldGpu:
 
     # ------------------------------------------------------------------------------- level 4 (cache)
     def _cache_extra(self) -> dict[str, Any]:
-        light = self._lighting(None)
+        """What the cached images depend on beyond the config and its random draws (the disk cache's key): their
+        tiles' size and framing.  Not the light: they hold the albedo and the normal, lit when drawn."""
         return {"tile": [self.layout.tile_w, self.layout.tile_h, self.layout.cols, self.layout.rows],
-                "frame": [self.frame.half_width, self.frame.bottom, self.frame.top, self.frame.depth],
-                "sun_dir": [round(float(x), 6) for x in light["sun_dir"]],
-                "sun_color": [round(float(x), 6) for x in light["sun_color"]],
-                "ambient": round(float(light["ambient"]), 6),
-                "sky": [round(float(x), 6) for x in (*light["sky_top"], *light["sky_horizon"])]}
+                "frame": [self.frame.half_width, self.frame.bottom, self.frame.top, self.frame.depth]}
+
+    def _light(self) -> tuple:
+        """The light the band's captures are lit with (sun direction and colour, ambient, sky colours)."""
+        light = self._lighting(None)
+        return (tuple(float(x) for x in light["sun_dir"]), tuple(float(x) for x in light["sun_color"]),
+                float(light["ambient"]), tuple(float(x) for x in (*light["sky_top"], *light["sky_horizon"])))
 
     def ensure_impostors(self) -> None:
         """Bake the 12 views of every cell layout into the atlas once (or load them from the disk cache)."""
@@ -394,44 +421,51 @@ class FieldGpu:
         w, h = self.layout.size
         key = cache_key(self.cfg, self.state, self._cache_extra())
         disk = DiskCache(self.cfg.cache_dir) if self.cfg.disk_cache else None
-        found = disk.load(key, (h, w, 4), (h, w, 2)) if disk is not None else None
+        found = disk.load(key, (h, w, 4), (h, w, 2), (h, w, 4)) if disk is not None else None
         self.atlas = self.ctx.texture((w, h), 4)
         self.atlas_depth = self.ctx.texture((w, h), 2, dtype="f2")
+        self.atlas_normal = self.ctx.texture((w, h), 4)
         if found is not None:
-            image, depth = found
+            image, depth, normal = found
             self.loaded_from_disk = True
             self.disk_path = disk.path(key)
             self.atlas.write(np.ascontiguousarray(image).tobytes())
             self.atlas_depth.write(np.ascontiguousarray(depth).tobytes())
+            self.atlas_normal.write(np.ascontiguousarray(normal).tobytes())
         else:
-            image, depth = self._bake_atlas()
+            image, depth, normal = self._bake_atlas()
             if disk is not None:
-                self.disk_path = disk.store(key, image, depth)
+                self.disk_path = disk.store(key, image, depth, normal)
         self.bounds_tex = _data_texture(self.ctx, tile_bounds(image, self.layout))
         _write_levels(self.atlas, coverage_mipmaps(image, ATLAS_MIP_LEVELS), np.uint8)
-        # the depth's levels: plain box filters of (depth · coverage, coverage) over the colour levels' texels, so
-        # their ratio is the covered texels' mean depth wherever the colour's coverage-scaled alpha passes (GL's
-        # generated levels filter other texels at odd sizes: grass in colour, none in depth, read as depth 0)
+        # the depth's and the normal's levels: plain box filters of (depth, 1) · coverage and (normal / 2 + 1 / 2,
+        # normal.y^2) · coverage over the colour levels' texels, so their ratios are the covered texels' mean depth and normal
+        # wherever the colour's coverage-scaled alpha passes (GL's generated levels filter other texels at odd
+        # sizes: grass in colour, none in depth, read as depth 0)
         _write_levels(self.atlas_depth, box_mipmaps(depth, ATLAS_MIP_LEVELS), np.float16)
+        _write_levels(self.atlas_normal, [np.round(level).astype(np.uint8)
+                                          for level in box_mipmaps(normal, ATLAS_MIP_LEVELS)], np.uint8)
         # bilinear within the nearest mip level: trilinear filtering fetches twice the texels of an alpha-tested
         # image for a blend the coverage-preserving levels barely need (-25 % of the level-4 pass on llvmpipe)
-        for tex in (self.atlas, self.atlas_depth):
+        for tex in (self.atlas, self.atlas_depth, self.atlas_normal):
             tex.filter = (moderngl.LINEAR_MIPMAP_NEAREST, moderngl.LINEAR)
             tex.repeat_x = tex.repeat_y = False
 
-    def _bake_atlas(self) -> tuple[np.ndarray, np.ndarray]:
-        """Render level-3 grass of each layout at 12 views (every 30°) with a transparent background; (the
-        colour atlas, rgba8; its depth image, float16 (window depth, 1) where grass is drawn)."""
+    def _bake_atlas(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Render level-3 grass of each layout at 12 views (every 30°) with a transparent background, unlit; (the
+        albedo atlas, rgba8; its depth image, float16 (window depth, 1) where grass is drawn; its normal image,
+        rgba8 (normal / 2 + 1 / 2, normal.y^2) in the layout's frame where grass is drawn)."""
         ctx, cfg, state = self.ctx, self.cfg, self.state
         w, h = self.layout.size
         depth = ctx.depth_renderbuffer((w, h))
-        fbo = ctx.framebuffer(color_attachments=[self.atlas, self.atlas_depth], depth_attachment=depth)
+        fbo = ctx.framebuffer(color_attachments=[self.atlas, self.atlas_depth, self.atlas_normal],
+                              depth_attachment=depth)
         layouts = cfg.cell_variants
         n = cfg.plants_per_cell
         offsets = state.layout_offset.reshape(-1, 2)
         local = np.column_stack([offsets[:, 0], np.zeros(len(offsets)), offsets[:, 1]])
         records = plant_records(local, state.layout_yaw.reshape(-1), state.layout_scale.reshape(-1),
-                                state.layout_tint.reshape(-1))  # lit by the whole sun: shade comes at draw time
+                                state.layout_tint.reshape(-1))  # unlit: light and shade come at draw time
         variants_of = np.asarray(state.layout_variant, np.int64).reshape(-1)
         plants = ctx.buffer(reserve=max(1, n) * RECORD_BYTES)
         try:
@@ -440,7 +474,7 @@ class FieldGpu:
             ctx.enable(moderngl.DEPTH_TEST)
             ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
             prog = self._program("plant", atlas_depth=True)
-            set_uniforms(prog, **self._lighting(None), **self._plant_uniforms())
+            set_uniforms(prog, **self._plant_uniforms())
             progress = Progress("grass_field: baking the LOD cache", layouts * N_VIEWS)
             for k in range(layouts):
                 commands = self._upload_plants(plants, records, variants_of, np.arange(k * n, (k + 1) * n),
@@ -451,18 +485,19 @@ class FieldGpu:
                     fbo.scissor = vp
                     _, _, normal = impostor_basis(v * 2.0 * np.pi / N_VIEWS, self.frame.elevation)
                     set_uniforms(prog, view_proj=bake_view_proj(v, self.frame).T.astype(np.float32).copy(),
-                                 camera_pos=tuple(normal * (2.0 * self.frame.depth + 1.0)))
+                                 bake_normal=tuple(normal))
                     self._draw_plants(prog, plants, commands, [3])
                     self.baked_views += 1
                 progress.update((k + 1) * N_VIEWS)
             fbo.scissor = None
-            raw, raw_depth = self.atlas.read(), self.atlas_depth.read()
+            raw, raw_depth, raw_normal = self.atlas.read(), self.atlas_depth.read(), self.atlas_normal.read()
         finally:
             fbo.release()
             depth.release()
             plants.release()
         return (np.frombuffer(raw, np.uint8).reshape(h, w, 4).copy(),
-                np.frombuffer(raw_depth, np.float16).reshape(h, w, 2).copy())
+                np.frombuffer(raw_depth, np.float16).reshape(h, w, 2).copy(),
+                np.frombuffer(raw_normal, np.uint8).reshape(h, w, 4).copy())
 
     def _impostor_uniforms(self, view_proj: np.ndarray, eye: np.ndarray, ortho: bool) -> dict[str, Any]:
         f, lay = self.frame, self.layout
@@ -483,6 +518,7 @@ class FieldGpu:
             data[:, 7] = level
             placed = self.data.placed
             data[:, 8] = np.maximum(placed.cell_ground[cells, 1] - placed.cell_centre[cells, 1], 0.0)
+            data[:, 9] = self.data.cell_turn[cells]
             (self.impostor_buf if buffer is None else buffer).write(data.tobytes())
         return len(cells)
 
@@ -629,11 +665,12 @@ class FieldGpu:
         self.ctx.enable(moderngl.DEPTH_TEST)
         self.ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
         prog = self._program("impostor", band_distance=True, terrain_shadow=terrain is not None)
-        set_uniforms(prog, **self._lighting(None), **self._terrain_uniforms(terrain),
-                     **self._shade_uniforms(terrain, False))
+        set_uniforms(prog, **self._lighting(None), **self._terrain_uniforms(terrain), **self._depth_uniforms(False))
         vao = self._vao(prog, ("impostor", self.impostor_buf))
         self.atlas.use(0)
         self.bounds_tex.use(1)
+        self.atlas_depth.use(2)
+        self.atlas_normal.use(3)
         for side in range(N_BAND_SIDES):
             vp = lay.viewport(entry.slot * N_BAND_SIDES + side)
             fbo.viewport = vp
@@ -680,47 +717,36 @@ class FieldGpu:
         """terrain_shadow.glsl's uniforms for ``terrain``, or nothing without one."""
         return {} if terrain is None else terrain.uniforms(self.ctx)
 
-    def _shade_uniforms(self, terrain: TerrainShadow | None, receiving: bool) -> dict[str, Any]:
-        """impostor.frag's shaded colour factor (where the terrain or the sun's shadow map hides the sun), or
-        nothing when neither applies."""
-        if terrain is None and not receiving:
-            return {}
-        r = self.renderer
-        sky = np.asarray(r.settings.sky_top, np.float64) * r.ambient  # lit.glsl's hemisphere light, upwards
-        sun = np.asarray(r.sun_color, np.float64) * max(float(r.sun_direction[1]), 0.0)
-        shade = sky / np.maximum(sun + sky, 1e-6)
-        return {"shade_factor": tuple(float(x) for x in shade)}
-
-    def _depth_uniforms(self, used: bool) -> dict[str, Any]:
-        """impostor.vert's and .frag's uniforms for the texels' grass positions (the atlas's depth image on unit 2),
-        when ``used`` (the SHADOWS or GRASS_DEPTH variant)."""
-        if not used:
-            return {}
+    def _depth_uniforms(self, positions: bool) -> dict[str, Any]:
+        """impostor.frag's depth and normal images (units 2 and 3) and, when ``positions`` (the SHADOWS or
+        GRASS_DEPTH variant), impostor.vert's uniforms for the texels' grass positions."""
+        if not positions:
+            return dict(atlas_depth=2, atlas_normal=3)
         distance, near, far = bake_depth_range(self.frame)
-        return dict(atlas_depth=2, bake_depth=(distance - near, far - near),
+        return dict(atlas_normal=3, atlas_depth=2, bake_depth=(distance - near, far - near),
                     depth_margin=0.25 * self.data.plant_height)
 
     def sync_lighting(self) -> None:
-        """Follow the renderer's light and the terrain's shadow: a new sun or sky (a hot reload) re-bakes the
-        cached images (levels 4 and 5: the disk cache keys them by the light, so a return to an earlier light
-        loads them back); a new terrain shadow re-takes each plant's share of the sun (levels 0-3) and
-        re-captures the bands, whose images hold it."""
+        """Follow the renderer's light and the terrain's shadow.  The level-4 images are unlit (each texel is lit
+        when drawn), so a new sun or sky re-bakes nothing there.  The bands' images (level 5) are captured lit:
+        they are captured again once the light strays past BAND_LIGHT_TOLERANCE from the one they hold (a sun
+        moving every frame, as a day's cycle moves it, re-captures the viewer's band every degree or so, not every
+        frame).  A new terrain shadow re-takes each plant's share of the sun (levels 0-3) and re-captures the
+        bands, whose images hold it."""
         r = self.renderer
-        light = self._cache_extra()
-        light = (light["sun_dir"], light["sun_color"], light["ambient"], light["sky"])
-        if self._light_key is not None and light != self._light_key and self.atlas is not None:
-            for obj in (self.atlas, self.atlas_depth, self.bounds_tex):
-                obj.release()
-            self.atlas = self.atlas_depth = self.bounds_tex = None
-            self.band_entries.clear()
+        light = self._light()
+        if self._light_key is None or not light_close(light, self._light_key):
+            if self._light_key is not None:
+                self.band_entries.clear()
+            self._light_key = light
         terrain = r.terrain_shadow
         terrain_key = None if terrain is None else terrain.key
         if terrain_key != self._terrain_key:
             sun = 1.0 if terrain is None else terrain.visibility(self.data.placed.plant_position)
             self.plant_records[:, 7] = sun
-            if self._light_key is not None:
+            if self._terrain_key is not None or self.band_entries:
                 self.band_entries.clear()
-        self._light_key, self._terrain_key = light, terrain_key
+        self._terrain_key = terrain_key
 
     def prepare(self, plan: FramePlan, camera: CameraInput, viewer=None, terrain_shadow: bool = True) -> None:
         """Bake what this frame needs and is not cached yet (the LOD cache; the viewer cell's band, with the
@@ -796,13 +822,12 @@ class FieldGpu:
             prog = self._program("impostor", debug=debug, fog=fog, terrain_shadow=terrain is not None,
                                  shadows=shadow[1] if receiving else (), grass_depth=self.grass_depth)
             set_uniforms(prog, **{**lighting, **self._impostor_uniforms(view.view_proj, view.camera_pos, view.ortho),
-                                  **self._terrain_uniforms(terrain), **self._shade_uniforms(terrain, receiving),
-                                  **self._depth_uniforms(receiving or self.grass_depth),
+                                  **self._terrain_uniforms(terrain), **self._depth_uniforms(receiving or self.grass_depth),
                                   **(shadow[2] if receiving else {})})
             self.atlas.use(0)
             self.bounds_tex.use(1)
-            if receiving or self.grass_depth:
-                self.atlas_depth.use(2)
+            self.atlas_depth.use(2)
+            self.atlas_normal.use(3)
             self._vao(prog, ("impostor", buf)).render(moderngl.TRIANGLE_STRIP, vertices=4, instances=count)
             self.draw_calls += 1
         # level 5
@@ -819,7 +844,7 @@ class FieldGpu:
             return
         self._released = True
         objects = [self.instance_buf, self.command_buf, self.impostor_buf, self.impostor_shadowed_buf,
-                   self.bounds_tex, self.band_buf, self.atlas, self.atlas_depth,
+                   self.bounds_tex, self.band_buf, self.atlas, self.atlas_depth, self.atlas_normal,
                    self.band_tex, self.band_distance, self.band_fbo, self.band_depth]
         objects += list(self._vaos.values())  # the programs belong to the renderer (shared between fields)
         objects += list(self.mesh_vbo.values()) + list(self.mesh_ibo.values())

@@ -21,11 +21,13 @@ in vec2 i_tiles;
 in float i_blend;
 in float i_level;
 in float i_relief;      // how far the cell's ground strays from the flat ground its images were baked on
+in float i_turn;        // the cell's quarter turns (its layout turned into place: layout.place_field)
 out vec2 v_uv_a;
 out vec2 v_uv_b;
 out float v_blend;
 out float v_fog;        // fog factor (lit.glsl's fog) per corner: a rectangle spans little of the fog's range
 flat out int v_level;
+flat out vec2 v_turn;   // cosine and sine of the cell's turn: the atlas's normals are in its layout's frame
 #ifdef BAND_DISTANCE
 out vec3 v_world;       // the rectangle's point where the cell stands (before the scaling about the eye)
 #endif
@@ -90,6 +92,8 @@ void main() {
     } else {
         world += normal * frame.w;
     }
+    int turn = int(i_turn + 0.5) & 3;  // quarter turns: exact cosines and sines
+    v_turn = vec2(turn == 0 ? 1.0 : (turn == 2 ? -1.0 : 0.0), turn == 1 ? 1.0 : (turn == 3 ? -1.0 : 0.0));
     v_uv_a = tile_uv(i_tiles.x, corner);
     v_uv_b = tile_uv(i_tiles.y, corner);
     v_blend = i_blend;

@@ -11,8 +11,10 @@
 // vertices.  Lines and dots (levels 2-3) have no surface and take a fixed light.
 // Variants (render.py): DEBUG_LEVELS (the debug view), FOG (the view has fog), TERRAIN_SHADOW (the view receives
 // the terrain's shadow: i_p1.w scales the sun's light), SHADOWS / SHADOW_SOFT (the sun's shadow map, looked up
-// per vertex: only the plants a caster's shadow may reach are drawn with it).  llvmpipe runs both sides of every
-// branch, so the lighting is computed once, with selects, and what a variant leaves out costs nothing.
+// per vertex: only the plants a caster's shadow may reach are drawn with it), ATLAS_DEPTH (the LOD cache's bake:
+// no light; the albedo and the normal, for impostor.frag, which lights each texel as this shader lights a
+// vertex).  llvmpipe runs both sides of every branch, so the lighting is computed once, with selects, and what a
+// variant leaves out costs nothing.
 uniform mat4 view_proj;
 in vec4 in_a;  // the vertex: plant-local position, colour parameter (0 at the blade's root, 1 at the tip)
 in vec4 in_b;  // normal, kind (0 tube, 1 leaf, 2 line or dot)
@@ -25,6 +27,10 @@ uniform vec3 leaf_tip_color;
 uniform int debug_level;  // the level to show
 #endif
 out vec3 v_color;
+#ifdef ATLAS_DEPTH
+uniform vec3 bake_normal;  // the cached view's camera looks down -bake_normal (impostor.impostor_basis)
+out vec3 v_normal;         // the normal as the lighting below takes it (in the layout's frame)
+#endif
 #ifdef FOG
 out float v_fog;  // lit.glsl's fog factor
 #endif
@@ -36,9 +42,21 @@ void main() {
     float kind = b.w;  // 0 tube, 1 leaf, 2 line or dot
     vec3 albedo = (kind > 0.5 && kind < 1.5) ? mix(leaf_base_color, leaf_tip_color, a.w) : stem_color;
     albedo *= 1.0 + p1.z;
+#ifdef ATLAS_DEPTH
+    vec3 to_eye = bake_normal;  // the cached views are orthographic
+#else
     vec3 to_eye = camera_pos - world;
+#endif
     bool dots = kind > 1.5;
     n = dots ? vec3(0.0, 1.0, 0.0) : (dot(n, to_eye) < 0.0 ? -n : n);
+#ifdef ATLAS_DEPTH
+    // the cached image holds what the light acts on; impostor.frag lights it with the light of the frame drawn
+    // (lines and dots: 80 % of the albedo, no specular term; the leaves' specular term is left out there)
+    v_color = albedo * (dots ? 0.8 : 1.0);
+    v_normal = n;
+    gl_Position = view_proj * vec4(world, 1.0);
+    return;
+#endif
     // lit.glsl's shade() with shininess 16 as four squarings; lines and dots have no specular term (strength 0)
     // and are drawn at 80 %
     float strength = dots ? 0.0 : (kind > 0.5 ? 0.05 : 0.02);

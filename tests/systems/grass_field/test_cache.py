@@ -41,21 +41,24 @@ def test_cache_key_is_the_same_in_another_process():
 
 def test_disk_cache_round_trip(tmp_path):
     cache = DiskCache(tmp_path / "cache")
-    atlas = np.random.default_rng(0).integers(0, 255, (8, 16, 4), dtype=np.uint8)
-    assert cache.load("k" * 64, atlas.shape) is None
-    path = cache.store("k" * 64, atlas)
+    rng = np.random.default_rng(0)
+    atlas = rng.integers(0, 255, (8, 16, 4), dtype=np.uint8)
+    depth = rng.random((8, 16, 2)).astype(np.float16)
+    normal = rng.integers(0, 255, (8, 16, 4), dtype=np.uint8)
+    shapes = (atlas.shape, depth.shape, normal.shape)
+    assert cache.load("k" * 64, *shapes) is None
+    path = cache.store("k" * 64, atlas, depth, normal)
     assert path.is_file()
-    loaded, depth = cache.load("k" * 64, atlas.shape)
-    assert np.array_equal(loaded, atlas) and depth is None
-    assert cache.load("k" * 64, (8, 8, 4)) is None  # another layout: rebake
-    assert cache.load("k" * 64, atlas.shape, (8, 16, 2)) is None  # no depth image stored: rebake
-    depth = np.random.default_rng(1).random((8, 16, 2)).astype(np.float16)
-    cache.store("k" * 64, atlas, depth)
-    loaded, loaded_depth = cache.load("k" * 64, atlas.shape, depth.shape)
-    assert np.array_equal(loaded, atlas) and np.array_equal(loaded_depth, depth)
-    assert cache.load("k" * 64, atlas.shape, (8, 8, 2)) is None
+    loaded = cache.load("k" * 64, *shapes)
+    assert all(np.array_equal(a, b) for a, b in zip(loaded, (atlas, depth, normal)))
+    assert cache.load("k" * 64, (8, 8, 4), depth.shape, normal.shape) is None  # another layout: rebake
+    assert cache.load("k" * 64, atlas.shape, (8, 8, 2), normal.shape) is None
+    assert cache.load("k" * 64, atlas.shape, depth.shape, (8, 8, 4)) is None
+    assert cache.load("j" * 64, *shapes) is None  # another key (the file name holds only its first 40 digits)
+    np.savez_compressed(path, atlas=atlas, depth=depth, key=np.array("k" * 64))  # an older format: no normal image
+    assert cache.load("k" * 64, *shapes) is None
     path.write_bytes(b"not a zip")
-    assert cache.load("k" * 64, atlas.shape) is None  # unreadable: ignored, rebaked
+    assert cache.load("k" * 64, *shapes) is None  # unreadable: ignored, rebaked
 
 
 def test_coverage_preserving_mipmaps():

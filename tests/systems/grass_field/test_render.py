@@ -344,21 +344,85 @@ def test_a_view_that_hides_the_terrain_gets_none_of_its_shadow_on_the_grass(tmp_
     np.testing.assert_array_equal(images[True], images[False])
 
 
-def test_a_new_sun_bakes_the_lod_cache_again(tmp_path):
-    """A hot reload of the sun (or the sky) re-bakes the cached images, lit as the plants now are, and
-    re-captures the band."""
-    app = _app(tmp_path, SMALL + "grid_x = 16\ngrid_z = 16\n", _camera((0.0, 40.0, 700.0), pitch=-5.0))
+def _use_sun(renderer, sun) -> None:
+    renderer.use_settings(renderer.settings.model_copy(update={"sun_direction": sun}))
+
+
+def test_a_new_sun_relights_the_cached_images_without_baking_them_again(tmp_path):
+    """The LOD cache holds unlit images (albedo, normal): a new sun (or sky) re-bakes nothing, and the level-4
+    picture is the one a field started under that sun draws."""
+    grass, camera = SMALL + "grid_x = 16\ngrid_z = 16\nmax_level = 4\n", _camera((0.0, 40.0, 700.0), pitch=-5.0)
+    app = _app(tmp_path, grass, camera)
     with rendered(app, 96, 72) as renderer:
         gpu = _gpu(app)
-        assert gpu.baked_views == 36
+        assert gpu.baked_views == 36 and len(_plan(app).impostor_cells) > 50
         before = np.asarray(renderer.read_image()).astype(float)
+        _use_sun(renderer, (-0.6, 0.3, 0.2))
         app.render_frame()
-        assert gpu.baked_views == 36
-        renderer.use_settings(renderer.settings.model_copy(update={"sun_direction": (-0.6, 0.3, 0.2)}))
-        app.render_frame()
-        assert gpu.baked_views == 72
+        assert gpu.baked_views == 36  # nothing baked again
         after = np.asarray(renderer.read_image()).astype(float)
-        assert np.abs(after - before).max() > 10.0
+    assert np.abs(after - before).max() > 10.0  # the images follow the new sun
+    fresh = _app(tmp_path, grass, camera, name="fresh.toml")
+    fresh.config.render.sun_direction = (-0.6, 0.3, 0.2)
+    with rendered(fresh, 96, 72) as renderer:
+        np.testing.assert_array_equal(np.asarray(renderer.read_image()).astype(float), after)
+
+
+def _mean_grass_colour(tmp_path, sun, turns: bool, name: str) -> np.ndarray:
+    """The mean colour of the level-4 grass pixels of a field seen from afar, its cells turned or not."""
+    grass = SMALL + "grid_x = 16\ngrid_z = 16\nmax_level = 4\n"
+    camera = _camera((0.0, 60.0, 1000.0), pitch=-6.0)
+    images = []
+    for hide in (False, True):
+        app = _app(tmp_path, grass, camera + ('hide_features = ["grass_field"]\n' if hide else ""),
+                   name=f"{name}{hide}.toml")
+        app.config.render.sun_direction = sun
+        app.config.render.fog_density = 0.0
+        app.config.render.shadows = False
+        if not turns:
+            for _, (state,) in app.world.query(GrassFieldState):
+                state.cell_turn[:] = 0
+        with rendered(app, 160, 120) as renderer:
+            images.append(np.asarray(renderer.read_image()).astype(float)[..., :3])
+            if not hide:
+                assert len(_plan(app).impostor_cells) > 150
+    grass_pixels = np.abs(images[0] - images[1]).sum(axis=-1) > 6.0
+    assert grass_pixels.sum() > 800
+    return images[0][grass_pixels].mean(axis=0)
+
+
+@pytest.mark.parametrize("sun", [(-0.2, 0.4, -0.9), (0.9, 0.15, -0.3)])
+def test_a_cells_quarter_turn_does_not_turn_the_light_on_its_cached_image(tmp_path, sun):
+    """Cells show their layout turned by quarter turns; the cached images of a layout are lit in the world's frame
+    (the normals turned with the cell), so a field of turned cells is lit as one of unturned cells under a low sun.
+    Baked lit in the layout's frame, 3 cells in 4 were lit from a sun turned with them (45 % brighter against the
+    light)."""
+    turned = _mean_grass_colour(tmp_path, sun, True, "turned")
+    straight = _mean_grass_colour(tmp_path, sun, False, "straight")
+    np.testing.assert_allclose(turned, straight, rtol=0.06)
+
+
+def test_the_band_is_captured_again_only_when_the_light_strays_past_the_tolerance(tmp_path):
+    """The band's images are captured lit: a sun moved by less than BAND_LIGHT_TOLERANCE keeps them (a sun moving
+    every frame does not re-capture every frame), a larger move captures them again."""
+    app = _app(tmp_path, SMALL + "grid_x = 24\ngrid_z = 24\n", _camera((0.0, 40.0, 0.0), yaw=180.0, pitch=-3.0))
+    app.config.render.sun_direction = (1.0, 1.0, 0.0)
+    with rendered(app, 96, 72) as renderer:
+        gpu = _gpu(app)
+        assert _plan(app).band_cell is not None and gpu.band_bakes >= 1
+        bakes = gpu.band_bakes
+        for degrees in (0.3, 0.6, 0.9):  # every step measured from the light the band holds
+            a = np.radians(45.0 + degrees)
+            _use_sun(renderer, (float(np.cos(a)), float(np.sin(a)), 0.0))
+            app.render_frame()
+            assert gpu.band_bakes == bakes
+        a = np.radians(46.5)
+        _use_sun(renderer, (float(np.cos(a)), float(np.sin(a)), 0.0))
+        app.render_frame()
+        assert gpu.band_bakes == bakes + 1
+        renderer.use_settings(renderer.settings.model_copy(update={"sky_top": (0.3, 0.45, 0.85)}))  # +20 % red
+        app.render_frame()
+        assert gpu.band_bakes == bakes + 2
 
 
 def test_the_plants_receive_the_suns_shadow_map(tmp_path):
