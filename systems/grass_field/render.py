@@ -744,7 +744,10 @@ class FieldGpu:
         if terrain_key != self._terrain_key:
             sun = 1.0 if terrain is None else terrain.visibility(self.data.placed.plant_position)
             self.plant_records[:, 7] = sun
-            if self._terrain_key is not None or self.band_entries:
+            # the key is (terrain, origin, model, sun direction) (engine/render/passes.py): a new sun alone is the
+            # light's tolerance's business above; another terrain re-captures the bands
+            if (terrain_key is None or self._terrain_key is None or terrain_key[:-1] != self._terrain_key[:-1]) \
+                    and (self._terrain_key is not None or self.band_entries):
                 self.band_entries.clear()
         self._terrain_key = terrain_key
 
