@@ -20,7 +20,9 @@ The scene's settings (``[scene]``, ``[render]``) on reload:
 * ``plugins``: systems and render passes cannot be swapped into a running game, so a changed list holds the
   whole edit back and says to run the game again (R rebuilds the scene with the plugins already loaded);
 * ``[render]`` is live (the renderer reads the new settings the next frame) except ``width``, ``height`` (the
-  window's size) and ``vsync`` (set when the window opens), which keep their running values and are noted.
+  window's size) and ``vsync`` (set when the window opens), which keep their running values and are noted.  The
+  light (sun, sky, ambient, fog) is world state that scripts may change (``render.light``): the light keys the
+  edit changed are written into it, the others keep what scripts set (engine/render/lighting.py).
 
 A watched file that goes from content to zero bytes is taken for an editor's save in progress: the reload is
 held back (a scene that suddenly has no entities would despawn the whole world and respawn it from scratch)
@@ -51,6 +53,7 @@ from pydantic import ValidationError
 from engine.config import (STOCK_CONFIGS, ConfigError, Problem, locate_line, read_toml, resolve_asset,
                            resolve_inside)
 from engine.prefab import PrefabInstance, PrefabLibrary
+from engine.render.lighting import follow_file
 from engine.registry import BuildContext
 from engine.scene import EntityPlan, EntityRecord, build_problem, plan_scene, spawn_entity
 from engine.script import Scripts, make_slot
@@ -385,6 +388,7 @@ class HotReloader:
         live = _diff(running, render)
         waiting = [k for k in RUN_AGAIN_RENDER_KEYS if getattr(new.render, k) != getattr(before.render, k)]
         app.config = new.model_copy(update={"render": render})
+        follow_file(app.world, render)  # the light keys the file changed; the others keep what scripts set
         if live:
             if app.renderer is not None:
                 app.renderer.use_settings(render)

@@ -50,6 +50,13 @@ class EntityConfig(ConfigModel):
     scripts: list[ScriptRef] = Field(default_factory=list, max_length=64)
 
 
+def nonzero_direction(direction: tuple[float, ...]) -> tuple[float, ...]:
+    """The check of ``[render] sun_direction`` (and of the ``render.light`` command's): any length but zero."""
+    if math.sqrt(sum(x * x for x in direction)) < 1e-9:
+        raise ValueError("expected a non-zero direction (the sun's light comes from it)")
+    return direction
+
+
 class RenderSettings(ConfigModel):
     width: int = Field(960, ge=16, le=8192, description="Window / offscreen width in pixels.")
     height: int = Field(540, ge=16, le=8192, description="Window / offscreen height in pixels.")
@@ -126,9 +133,7 @@ class RenderSettings(ConfigModel):
     @field_validator("sun_direction")
     @classmethod
     def _sun_nonzero(cls, direction: tuple[float, ...]) -> tuple[float, ...]:
-        if math.sqrt(sum(x * x for x in direction)) < 1e-9:
-            raise ValueError("expected a non-zero direction (the sun's light comes from it)")
-        return direction
+        return nonzero_direction(direction)
 
     vsync: bool = Field(True, description="In a window, wait for the display's refresh between frames.")
 

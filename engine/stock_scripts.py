@@ -6,6 +6,7 @@ They use only the public scripting API, like any game's scripts.
 from __future__ import annotations
 
 import math
+from typing import Any, ClassVar
 
 import numpy as np
 from pydantic import Field
@@ -148,4 +149,114 @@ class SnapToGround(Script):
             t.position[1] = ground + self.params.offset
 
 
-SCRIPTS = [Spin, Bob, WasdMover, Spawner, Lifetime, SnapToGround]
+@script("sun_cycle")
+class SunCycle(Script):
+    """A day of game time: moves the sun along its path every tick (``render.light``); with ``tint`` the sun, the
+    ambient light and the sky dim and redden by the sun's height.
+
+    The path is a great circle: the sun rises towards +x at 6 o'clock, stands highest at noon, ``tilt`` degrees
+    from the zenith towards +z, sets towards -x at 18 o'clock and is lowest at midnight; ``azimuth`` turns it
+    about the vertical.  The hour is ``start_hour`` + 24 × (ticks run, pauses left out) × dt / ``period``, and the
+    direction comes from engine.exact's sin and cos: the same bits in every process.
+
+    ``tint``: the sun's colour fades from the day's to black between about 15° above the horizon and 6° under it
+    (smoothstep on the height), yellowing then reddening on the way; the ambient light and the sky colours go
+    from the day's down to ``night`` of them, the horizon reddening at dawn and dusk.  The day's values are the
+    light in force when the script starts, and a field someone else changes (a hot reload of the scene's
+    ``[render]``, another script's ``render.light``) becomes that field's new day value.  The fog stays."""
+
+    class Params(ConfigModel):
+        period: float = Field(120.0, gt=0.0, le=1.0e7, description="Seconds of game time for a whole day.")
+        start_hour: float = Field(9.0, ge=0.0, lt=24.0,
+                                  description="The hour when the script starts: 6 sunrise, 12 noon, 18 sunset.")
+        azimuth: float = Field(0.0, ge=-360.0, le=360.0,
+                               description="Degrees the sun's path is turned about the vertical (0: it rises "
+                                           "towards +x and leans towards +z at noon).")
+        tilt: float = Field(30.0, ge=0.0, le=89.0, description="Degrees of the noon sun from the zenith (the "
+                                                               "path's tilt; about the latitude).")
+        min_elevation: float = Field(-90.0, ge=-90.0, le=89.0,
+                                     description="The sun never goes lower than this many degrees above the horizon "
+                                                 "(e.g. 5: a low sun all night, never under the ground).")
+        interval: float = Field(0.0, ge=0.0, le=3600.0,
+                                description="Seconds of game time between moves of the sun (0: every tick). Every "
+                                            "change of the light re-makes the terrain's light and shadow map and the "
+                                            "grass's cached images: a slow day looks the same at 1 s steps and "
+                                            "costs less.")
+        tint: bool = Field(True, description="Dim and redden the sun, the ambient light and the sky by the sun's "
+                                             "height (night, dawn and dusk); off: only the sun's direction moves.")
+        night: float = Field(0.15, ge=0.0, le=1.0, description="With tint: the share of the day's ambient light and "
+                                                               "sky colours left at night.")
+
+    TINTED: ClassVar[tuple[str, ...]] = ("sun_color", "ambient", "sky_top", "sky_horizon")
+
+    def on_start(self) -> None:
+        self.ticks = 0  # ticks run, pauses left out: the game time of the day is ticks × dt
+        self.day: dict[str, Any] = {}  # the day's light of the tinted fields
+        self.written: dict[str, Any] = {}  # what this script last set them to
+
+    def on_update(self, dt: float) -> None:
+        if self.ctx.paused:
+            return
+        seconds = self.ticks * dt
+        self.ticks += 1
+        p = self.params
+        if p.interval > 0.0:
+            seconds = math.floor(seconds / p.interval) * p.interval
+        hour = (p.start_hour + 24.0 * seconds / p.period) % 24.0
+        direction = sun_path(hour, p.tilt, p.azimuth, p.min_elevation)
+        if not p.tint:
+            self.ctx.call("render.light", sun_direction=direction)
+            return
+        light = self.ctx.call("render.light")  # the light in force
+        for key in self.TINTED:
+            if getattr(light, key) != self.written.get(key):  # set by someone else (or not yet by this script)
+                self.day[key] = getattr(light, key)
+        self.written = tint_light(self.day, direction[1], p.night)
+        self.ctx.call("render.light", sun_direction=direction, **self.written)
+
+
+def sun_path(hour: float, tilt: float, azimuth: float, min_elevation: float) -> tuple[float, float, float]:
+    """The unit direction towards the sun at ``hour`` (degrees for the rest; see :class:`SunCycle`).
+
+    θ = 2π (hour − 6) / 24 from the rising point: d = cos θ · east + sin θ · noon, east = (1, 0, 0) and
+    noon = (0, cos tilt, sin tilt); below ``min_elevation`` the height is held at it (the sun slides along that
+    circle); then a turn by ``azimuth`` about +y."""
+    theta = 2.0 * math.pi * (hour - 6.0) / 24.0
+    tilt_r = math.radians(tilt)
+    x = exact.cos_scalar(theta)
+    y = exact.sin_scalar(theta) * exact.cos_scalar(tilt_r)
+    z = exact.sin_scalar(theta) * exact.sin_scalar(tilt_r)
+    floor = exact.sin_scalar(math.radians(min_elevation))
+    if y < floor:
+        across = exact.hypot_scalar(x, z)
+        scale = exact.cos_scalar(math.radians(min_elevation))
+        x, z = (x / across * scale, z / across * scale) if across > 0.0 else (0.0, -scale)
+        y = floor
+    a = math.radians(azimuth)
+    ca, sa = exact.cos_scalar(a), exact.sin_scalar(a)
+    return (x * ca + z * sa, y, z * ca - x * sa)
+
+
+DAWN_LOW, DAWN_HIGH = -0.1, 0.25  # sin of the sun's height: night below about -6°, full day above about 14.5°
+
+
+def tint_light(day: dict[str, Any], height: float, night: float) -> dict[str, Any]:
+    """The tinted fields of :class:`SunCycle` for a sun whose direction has y = ``height`` (sin of its elevation):
+    ``lit`` = smoothstep(DAWN_LOW, DAWN_HIGH, height), ``glow`` = 4 lit (1 − lit) (1 at mid-twilight);
+    sun = day sun × lit × (1, 1 − 0.4 glow, 1 − 0.7 glow); ambient and sky top = day × (night + (1 − night) lit);
+    horizon likewise × (1, 1 − 0.25 glow, 1 − 0.5 glow)."""
+    t = min(max((height - DAWN_LOW) / (DAWN_HIGH - DAWN_LOW), 0.0), 1.0)
+    lit = t * t * (3.0 - 2.0 * t)
+    glow = 4.0 * lit * (1.0 - lit)
+    level = night + (1.0 - night) * lit
+
+    def scaled(color, factors) -> tuple[float, ...]:
+        return tuple(c * f for c, f in zip(color, factors))
+
+    return {"sun_color": scaled(day["sun_color"], (lit, lit * (1.0 - 0.4 * glow), lit * (1.0 - 0.7 * glow))),
+            "ambient": day["ambient"] * level,
+            "sky_top": scaled(day["sky_top"], (level,) * 3),
+            "sky_horizon": scaled(day["sky_horizon"], (level, level * (1.0 - 0.25 * glow), level * (1.0 - 0.5 * glow)))}
+
+
+SCRIPTS = [Spin, Bob, WasdMover, Spawner, Lifetime, SnapToGround, SunCycle]

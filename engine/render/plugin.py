@@ -1,5 +1,5 @@
-"""The rendering core plugin: Camera and Mesh components, camera controllers, the HUD resource, and the
-render-extract / render systems that drive an attached :class:`~engine.render.renderer.Renderer`.
+"""The rendering core plugin: Camera and Mesh components, camera controllers, the HUD and Lighting resources, and
+the render-extract / render systems that drive an attached :class:`~engine.render.renderer.Renderer`.
 
 Nothing here imports GL: the renderer is created by the front end (window or headless) only.
 """
@@ -9,6 +9,7 @@ from __future__ import annotations
 from engine.registry import Registry
 from engine.config import Problem, format_key, locate_line, suggest, validate
 from engine.render.components import Camera, CameraConfig, Hud, MeshConfig, build_camera, camera_controllers
+from engine.render.lighting import light_command, setup_lighting
 from engine.schedule import Stage
 from engine.world import World
 
@@ -114,7 +115,9 @@ class RenderPlugin:
         registry.add_command("render.mesh", _mesh_command)
         registry.add_command("render.hud", _set_hud)
         registry.add_command("render.camera", _camera_command)
+        registry.add_command("render.light", light_command)
         registry.on_world(lambda world: world.insert_resource(Hud()))
+        registry.on_world(setup_lighting)
         registry.add_scene_check(_hidden_feature_check(registry))
 
 

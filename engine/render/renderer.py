@@ -24,6 +24,7 @@ import numpy as np
 from engine.render.components import Camera, Hud, look_at, projection, view_matrix, viewport_pixels
 from engine.render.feature import OVERLAY, SKY, ColorLayer, RenderFeature, View
 from engine.render.graph import RenderGraph, ResourcePool, TextureDesc
+from engine.render.lighting import Lighting, follow_file
 from engine.render.resolution import DynamicResolution
 from engine.render.shadows import Shadow, fit_light, light_basis, light_boxes
 from engine.spatial import Transform
@@ -434,14 +435,34 @@ class Renderer:
         return None if "terrain" in view.extra.get("hide", ()) else self.terrain_shadow
 
     def use_settings(self, settings) -> None:
-        """Draw with ``[render]`` settings (engine.scene.RenderSettings; a hot reload passes the new ones): most
-        are read every frame; the light is derived here."""
-        old, self.settings = getattr(self, "settings", None), settings
+        """Draw with the scene's ``[render]`` settings (engine.scene.RenderSettings; a hot reload passes the new
+        ones): most are read every frame.  The light (sun, sky, ambient, fog) is the world's
+        :class:`~engine.render.lighting.Lighting`: the light keys of ``settings`` that changed since the world last
+        took them are written into it first (:func:`~engine.render.lighting.follow_file`: a reload's edit, a test's
+        new sun), the others keep what scripts set; a world without one draws the settings' own light."""
+        old, self.scene_settings = getattr(self, "scene_settings", None), settings
         if old is None or any(getattr(old, key) != getattr(settings, key) for key in _RESOLUTION_SETTINGS):
             self.resolution.reset()  # a new target frame rate or scale range: start again from the set scale
-        self.sun_direction = _unit(np.array(settings.sun_direction, float)).astype(np.float32)
-        self.sun_color = np.array(settings.sun_color, np.float32)
-        self.ambient = float(settings.ambient)
+        world = self.app.world
+        follow_file(world, settings)
+        self._light = None  # derived again from the new settings
+        self._use_light(world.try_resource(Lighting))
+
+    def _use_light(self, light: Lighting | None) -> None:
+        """Draw with ``light`` (None: the scene settings' own): :attr:`settings` (``sky_top``, ``sky_horizon``,
+        ``fog_density``), :attr:`sun_direction` (unit), :attr:`sun_color` and :attr:`ambient` carry it for every
+        reader.  Nothing is remade when it is the light in effect (features key their caches on these values)."""
+        scene = self.scene_settings
+        if light is None:
+            light = Lighting.of(scene)
+        if light == self._light:
+            return
+        self._light = light
+        # the scene's settings object itself while the light is the file's (in-place edits of it stay live)
+        self.settings = scene if light == Lighting.of(scene) else scene.model_copy(update=light.values())
+        self.sun_direction = _unit(np.array(light.sun_direction, float)).astype(np.float32)
+        self.sun_color = np.array(light.sun_color, np.float32)
+        self.ambient = float(light.ambient)
 
     @property
     def set_render_scale(self) -> float:
@@ -533,7 +554,10 @@ class Renderer:
         self.draw()
 
     def extract(self, world: World) -> None:
-        """Render-extract stage: copy what the passes need and build the views (reads the world only)."""
+        """Render-extract stage: copy what the passes need and build the views (reads the world only).  The
+        world's light is taken here, before the features' extract: ticks that run while the frame draws
+        (``overlap``) may change it, and the frame keeps the light it extracted."""
+        self._use_light(world.try_resource(Lighting))
         self.time = world.tick * self.app.dt
         self._data = [f.extract(world) for f in self.features]
         self.views = self.build_views(world)

@@ -21,8 +21,8 @@ DRAWING = {"render.py", "extract.py", "mesh.py", "display.py", "textures.py", "i
 
 
 def _state_modules() -> list[Path]:
-    paths = [*ROOT.glob("engine/*.py"), ROOT / "engine" / "render" / "components.py", *ROOT.glob("components/*.py"),
-             *ROOT.glob("game_demo/**/*.py")]
+    paths = [*ROOT.glob("engine/*.py"), ROOT / "engine" / "render" / "components.py",
+             ROOT / "engine" / "render" / "lighting.py", *ROOT.glob("components/*.py"), *ROOT.glob("game_demo/**/*.py")]
     for effect in ("energy_wave", "toon_smoke", "water_surface", "dust_devil"):
         paths += ROOT.glob(f"systems/{effect}/*.py")
     return sorted(p for p in paths if p.name not in DRAWING)
