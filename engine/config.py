@@ -360,6 +360,16 @@ def resolve_asset(root: Path, relative: str) -> Path:
     return path
 
 
+def as_data(value: Any) -> Any:
+    """A value a script passed (tuples, numpy arrays and scalars) as TOML-like data for validation: sequences as
+    lists, numpy scalars as Python numbers; strings stay strings (and a vector field refuses them)."""
+    if hasattr(value, "tolist") and not isinstance(value, (str, bytes)):
+        return value.tolist()  # numpy arrays and scalars
+    if isinstance(value, tuple):
+        return [as_data(v) for v in value]
+    return value
+
+
 def deep_merge(base: dict, override: dict) -> dict:
     """``override`` on top of ``base``; nested tables merge, everything else replaces."""
     out = dict(base)

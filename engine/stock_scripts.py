@@ -179,9 +179,8 @@ class SunCycle(Script):
                                                  "(e.g. 5: a low sun all night, never under the ground).")
         interval: float = Field(0.0, ge=0.0, le=3600.0,
                                 description="Seconds of game time between moves of the sun (0: every tick). Every "
-                                            "change of the light re-makes the terrain's light and shadow map and the "
-                                            "grass's cached images: a slow day looks the same at 1 s steps and "
-                                            "costs less.")
+                                            "change of the light re-makes the terrain's light and shadow map (a few "
+                                            "ms): a slow day looks the same at 1 s steps and costs less.")
         tint: bool = Field(True, description="Dim and redden the sun, the ambient light and the sky by the sun's "
                                              "height (night, dawn and dusk); off: only the sun's direction moves.")
         night: float = Field(0.15, ge=0.0, le=1.0, description="With tint: the share of the day's ambient light and "

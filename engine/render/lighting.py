@@ -17,10 +17,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-import numpy as np
 from pydantic import create_model, field_validator
 
-from engine.config import ConfigModel, validate
+from engine.config import ConfigModel, as_data, validate
 from engine.scene import RenderSettings, nonzero_direction
 from engine.world import World
 
@@ -83,18 +82,6 @@ def setup_lighting(world: World) -> None:
     world.insert_resource(FileLight(light.values()))
 
 
-def _as_data(value: Any) -> Any:
-    """Tuples and numpy arrays as lists, numpy scalars as Python numbers (what validation takes; strings stay
-    strings and are refused)."""
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, tuple):
-        return [_as_data(v) for v in value]
-    return value
-
-
 def set_light(world: World, changes: dict[str, Any], file: str = "render.light") -> Lighting:
     """Set the given light fields (the others stay); validated like ``[render]``: a bad value or an unknown key
     raises :class:`engine.config.ConfigError` naming it (``file`` says where it came from) and keeps the light.
@@ -102,7 +89,7 @@ def set_light(world: World, changes: dict[str, Any], file: str = "render.light")
     light = world.resource(Lighting)
     if not changes:
         return light
-    merged = {key: _as_data(value) for key, value in (light.values() | changes).items()}
+    merged = {key: as_data(value) for key, value in (light.values() | changes).items()}
     new = Lighting.of(validate(LightSettings, merged, file=file))
     if new != light:
         world.insert_resource(new, state=True)

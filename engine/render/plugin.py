@@ -7,7 +7,7 @@ Nothing here imports GL: the renderer is created by the front end (window or hea
 from __future__ import annotations
 
 from engine.registry import Registry
-from engine.config import Problem, format_key, locate_line, suggest, validate
+from engine.config import Problem, as_data, format_key, locate_line, suggest, validate
 from engine.render.components import Camera, CameraConfig, Hud, MeshConfig, build_camera, camera_controllers
 from engine.render.lighting import light_command, setup_lighting
 from engine.schedule import Stage
@@ -38,7 +38,7 @@ def draw_system(world: World, dt: float) -> None:
 
 def _mesh_command(world: World, entity: int, **values) -> MeshConfig:
     """``ctx.call("render.mesh", shape="box", color=(r, g, b))``: a validated Mesh component."""
-    values = {k: list(v) if isinstance(v, tuple) else v for k, v in values.items()}
+    values = {k: as_data(v) for k, v in values.items()}
     return MeshConfig.model_validate(values)
 
 
@@ -70,7 +70,7 @@ def _camera_command(world: World, entity: int, camera: int | None = None, **valu
 
     target = entity if camera is None else entity_ref(world, camera, "camera")
     cam = world.get(target, Camera)
-    changes = {k: list(v) if isinstance(v, tuple) else v for k, v in values.items()}
+    changes = {k: as_data(v) for k, v in values.items()}
     merged = cam.config.model_dump(mode="json", warnings=False) | changes
     config = validate(CameraConfig, merged, file=f"render.camera (entity {target})")
     cam.config = config

@@ -146,7 +146,7 @@ def visibility(y: np.ndarray, shadow_height: np.ndarray, penumbra: float) -> np.
 class TerrainShadow:
     """One terrain's shadow-height map on the GPU and how receivers reach it (see the module docstring)."""
 
-    key: tuple  # what it was made from: the field, its model matrix, the sun
+    key: tuple  # what it was made from: the field, its model matrix, the sun (last; passes.py makes it)
     surface: HeightField  # the shadow heights S on the field's grid (local units), sampled as the field is
     ground: np.ndarray  # (rows, cols) float64 the sun's share on the ground itself (visibility at h)
     world_to_local: np.ndarray  # 4 × 4 (column-vector convention)
@@ -165,6 +165,12 @@ class TerrainShadow:
         return cls(key, HeightField(heights, field.spacing, field.origin),
                    visibility(field.heights, heights, penumbra), np.linalg.inv(np.asarray(model, np.float64)),
                    penumbra, below, casts)
+
+    @property
+    def ground_key(self) -> tuple:
+        """Its key less the sun: the same while only the sun moved (the grass's band follows the light on its own
+        tolerance)."""
+        return self.key[:-1]
 
     @property
     def heights(self) -> np.ndarray:

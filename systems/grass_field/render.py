@@ -170,6 +170,7 @@ class FieldGpu:
         # terrain shadow re-takes the plants' share (the level-4 images are unlit: nothing to do for them)
         self._light_key: tuple | None = None
         self._terrain_key: Any = None
+        self._terrain_ground: Any = None  # the terrain shadow's key less the sun (TerrainShadow.ground_key)
         self.cell_capacity = max(1, placed.cell_count)
         # the records of the plants drawn this frame, all geometric levels one after the other, each level's by
         # variant (the plan's plant list gathered on the CPU: 32 bytes a plant drawn, rewritten per frame)
@@ -439,9 +440,9 @@ class FieldGpu:
         self.bounds_tex = _data_texture(self.ctx, tile_bounds(image, self.layout))
         _write_levels(self.atlas, coverage_mipmaps(image, ATLAS_MIP_LEVELS), np.uint8)
         # the depth's and the normal's levels: plain box filters of (depth, 1) · coverage and (normal / 2 + 1 / 2,
-        # normal.y^2) · coverage over the colour levels' texels, so their ratios are the covered texels' mean depth and normal
-        # wherever the colour's coverage-scaled alpha passes (GL's generated levels filter other texels at odd
-        # sizes: grass in colour, none in depth, read as depth 0)
+        # normal.y^2) · coverage over the colour levels' texels, so their ratios are the covered texels' mean depth
+        # and normal wherever the colour's coverage-scaled alpha passes (GL's generated levels filter other texels
+        # at odd sizes: grass in colour, none in depth, read as depth 0)
         _write_levels(self.atlas_depth, box_mipmaps(depth, ATLAS_MIP_LEVELS), np.float16)
         _write_levels(self.atlas_normal, [np.round(level).astype(np.uint8)
                                           for level in box_mipmaps(normal, ATLAS_MIP_LEVELS)], np.uint8)
@@ -744,11 +745,11 @@ class FieldGpu:
         if terrain_key != self._terrain_key:
             sun = 1.0 if terrain is None else terrain.visibility(self.data.placed.plant_position)
             self.plant_records[:, 7] = sun
-            # the key is (terrain, origin, model, sun direction) (engine/render/passes.py): a new sun alone is the
-            # light's tolerance's business above; another terrain re-captures the bands
-            if (terrain_key is None or self._terrain_key is None or terrain_key[:-1] != self._terrain_key[:-1]) \
-                    and (self._terrain_key is not None or self.band_entries):
+            # a new sun alone is the light tolerance's business (above); another terrain re-captures the bands
+            ground = None if terrain is None else terrain.ground_key
+            if ground != self._terrain_ground and (self._terrain_ground is not None or self.band_entries):
                 self.band_entries.clear()
+            self._terrain_ground = ground
         self._terrain_key = terrain_key
 
     def prepare(self, plan: FramePlan, camera: CameraInput, viewer=None, terrain_shadow: bool = True) -> None:
@@ -825,7 +826,8 @@ class FieldGpu:
             prog = self._program("impostor", debug=debug, fog=fog, terrain_shadow=terrain is not None,
                                  shadows=shadow[1] if receiving else (), grass_depth=self.grass_depth)
             set_uniforms(prog, **{**lighting, **self._impostor_uniforms(view.view_proj, view.camera_pos, view.ortho),
-                                  **self._terrain_uniforms(terrain), **self._depth_uniforms(receiving or self.grass_depth),
+                                  **self._terrain_uniforms(terrain),
+                                  **self._depth_uniforms(receiving or self.grass_depth),
                                   **(shadow[2] if receiving else {})})
             self.atlas.use(0)
             self.bounds_tex.use(1)
