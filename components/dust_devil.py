@@ -97,7 +97,9 @@ class DustDevilConfig(ConfigModel):
                               description="R while the field is being dragged (cheaper frames while moving), at "
                                           "most `repeats`: a larger value (a preset's default over a scene's "
                                           "smaller `repeats`) keeps R at `repeats` while dragging.")
-    point_size: float = Field(2.0, ge=1.0, le=32.0, description="Point size in pixels.")
+    point_size: float = Field(2.0, ge=1.0, le=32.0, description=(
+        "Point size in window pixels (a view rendered at a lower scale draws as many fewer of its pixels: the dust "
+        "looks the same)."))
     color: Color3 = Field((0.86, 0.70, 0.47), description="Sand colour (linear RGB).")
     show_markers: bool = Field(True,
                                description="Draw the field box's 8 corners and its centre as red spheres (4).")

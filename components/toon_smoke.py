@@ -166,7 +166,9 @@ class ToonSmokeVolumeConfig(ConfigModel):
         [0.0, 0.18, 0.36], min_length=1, max_length=16,
         description="Where each band starts on the ramp coordinate c = (−v·g + 1)/2 (ascending, first 0). "
                     "c = 0 faces the viewer, 0.5 at the silhouette.")
-    outline_width: float = Field(1.5, ge=0.0, le=16.0, description="Outline width in pixels (0 = no outline).")
+    outline_width: float = Field(1.5, ge=0.0, le=16.0, description=(
+        "Outline width in window pixels (0 = no outline); a view rendered at a lower scale draws as many fewer "
+        "of its pixels, at least one."))
     outline_color: Color3 = Field((0.08, 0.08, 0.12), description="Outline colour (as shown on screen, 0..1).")
     outline_depth_threshold: float = Field(0.04, gt=0.0, le=10.0,
                                            description="Relative depth jump that draws an inner contour line.")

@@ -63,6 +63,14 @@ class View:
     is_main: bool = True
     camera_entity: int = 0
     extra: dict[str, Any] = field(default_factory=dict)
+    # the view's pixels per window pixel (the render scale: dynamic resolution lowers it); sizes set in window
+    # pixels (a point's, a line's) are this many of the view's pixels
+    pixel_scale: float = 1.0
+
+    def view_pixels(self, window_pixels: float) -> float:
+        """A size given in window pixels (a point's side, an outline's width: what configs set) in this view's
+        pixels, so that it looks the same at any render scale."""
+        return float(window_pixels) * self.pixel_scale
 
     @property
     def view_proj(self) -> np.ndarray:

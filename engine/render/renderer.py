@@ -539,7 +539,7 @@ class Renderer:
         width, height = max(1, int(round(rect[2] * scale))), max(1, int(round(rect[3] * scale)))
         v = View(name, width, height, view.astype(np.float32), proj.astype(np.float32), np.asarray(pos, np.float32),
                  np.asarray(fwd, np.float32), cfg.near, cfg.far, fov, cfg.projection == "orthographic",
-                 is_main=main, camera_entity=entity)
+                 is_main=main, camera_entity=entity, pixel_scale=scale)
         v.extra["rect"] = rect
         v.extra["border"] = tuple(cfg.border_color)
         v.extra["hide"] = frozenset(cfg.hide_features)

@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -335,6 +335,10 @@ class DustDevilParticles(RenderFeature):
     # ------------------------------------------------------------------------------ passes
     def add_passes(self, graph, view: View, data: list[DevilFrame]) -> None:
         for devil in data:
+            # point_size is in window pixels: at a lower render scale the points are as many fewer of the view's
+            # pixels, so that each covers the same share of the image and the dust keeps its density (below one
+            # pixel the scatter covers a pixel with the probability of the point's area; GL's points stay 1 px)
+            devil = replace(devil, point_size=view.view_pixels(devil.point_size))
             if not devil.pbvr:
                 self._add_points(graph, view, devil)
             elif self.use_scatter(devil.repeats):
@@ -393,13 +397,13 @@ class DustDevilParticles(RenderFeature):
                             point_size=devil.point_size, view_size=(view.width, view.height), scene_depth=0)
             if self.compute:
                 n = len(devil.positions)
-                shader = self._compute(math.ceil(devil.point_size))
+                shader = self._compute(max(1, math.ceil(devil.point_size)))
                 self._particle_buffer(devil).bind_to_storage_buffer(0)
                 self._bind_ball(shader)
                 set_uniforms(shader, particles=n, repeats=devil.repeats, **uniforms)
                 shader.run((n + COMPUTE_GROUP - 1) // COMPUTE_GROUP)
             else:
-                vao = self._vao(devil, "pbvr_scatter", (f"POINT_SIDE {math.ceil(devil.point_size)}",))
+                vao = self._vao(devil, "pbvr_scatter", (f"POINT_SIDE {max(1, math.ceil(devil.point_size))}",))
                 self._bind_ball(vao.program)
                 set_uniforms(vao.program, **uniforms)
                 ctx.enable(moderngl.RASTERIZER_DISCARD)

@@ -14,7 +14,7 @@ outline pass keeps their parameters in uniform arrays and runs in batches of 64 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import moderngl
@@ -213,6 +213,9 @@ class ToonSmokeFeature(RenderFeature):
     def add_passes(self, graph, view: View, data: list[VolumeDraw]) -> None:
         if not data:
             return
+        # outline widths are in window pixels: as many of the view's at its render scale, and at least one
+        data = [replace(d, outline_width=max(view.view_pixels(d.outline_width), 1.0) if d.outline_width > 0.0
+                        else 0.0) for d in data]
         handles = {}
 
         def setup(b):

@@ -266,3 +266,24 @@ def test_a_restored_run_draws_the_same_pbvr_picture_at_the_same_tick(tmp_path, g
         app.renderer = None
     assert pictures[0].any() and np.array_equal(pictures[0], pictures[1])
     assert not np.array_equal(paused[0], paused[1])
+
+
+def test_point_size_is_in_window_pixels_at_any_render_scale(tmp_path, gl_ctx):
+    """At half render scale each pseudo-particle covers a quarter of the view's pixels it covers at full scale, so
+    the dust is as dense on screen: the mean change it makes to the picture stays (drawn at the full point size in
+    the view's pixels, it doubled)."""
+    def mean_image(scale: float, hidden: bool) -> float:
+        cameras = camera(target_y=3.0, distance=14.0, pitch=-8.0)
+        if hidden:
+            cameras += 'hide_features = ["dust_devil"]\n'
+        app = app_for(tmp_path, name=f"s{int(scale * 100)}{'h' if hidden else ''}", cameras=cameras,
+                      terrain=False, position=(0.0, 0.0, 0.0), particle_count=300, prewarm_time=3.0,
+                      repeats=8, drag_repeats=1, show_markers=False, point_size=2.0, sub_particle_radius=0.8,
+                      grid_resolution=[16, 16, 16])
+        app.config.render.render_scale = scale
+        app.step(1)
+        return float(hdr_frames(app, 6, width=128, height=96).mean())
+
+    dust = {scale: mean_image(scale, False) - mean_image(scale, True) for scale in (1.0, 0.5)}
+    assert abs(dust[1.0]) > 1e-3
+    assert 0.8 < dust[0.5] / dust[1.0] < 1.25, dust  # 1.00 measured (2.1 before the size followed the scale)

@@ -180,3 +180,52 @@ def test_ramp_textures_of_earlier_exposures_are_released(tmp_path):
     finally:
         renderer.release()
         app.renderer = None
+
+
+def _view_colour(app, width: int, height: int) -> np.ndarray:
+    """The first view's HDR colour after the frame's passes, at the view's size (before any upscale)."""
+    renderer = make_renderer(app, width, height)
+    out = []
+    try:
+        renderer.extract(app.world)
+        graph = renderer.declare()
+        view = renderer.views[0]
+
+        def setup(b):
+            b.read(view.color)
+
+        def execute(pc):
+            raw = np.frombuffer(pc.get(view.color).read(), np.float16).astype(np.float64)
+            out.append(raw.reshape(view.height, view.width, 4)[..., :3])
+
+        graph.add_pass("test.read_hdr", setup, execute, side_effect=True)
+        graph.execute()
+    finally:
+        renderer.release()
+        app.renderer = None
+    return out[0]
+
+
+def _outline_share(tmp_path, scale: float) -> float:
+    """The share of the view's pixels the outline changes, the view of a 160 × 120 window rendered at ``scale``."""
+    from components.toon_smoke import ToonSmokeState, ToonSmokeVolumeConfig
+
+    app = preset_app(tmp_path, "paper", extra="outline_width = 2.0")
+    app.config.render.render_scale = scale
+    app.step(STEPS["paper"])
+    _, (cfg, _) = app.world.query(ToonSmokeVolumeConfig, ToonSmokeState)[0]
+    images = []
+    for width in (2.0, 0.0):
+        cfg.outline_width = width
+        images.append(_view_colour(app, 160, 120))
+    assert images[0].shape[:2] == (round(120 * scale), round(160 * scale))
+    return float((np.abs(images[0] - images[1]).max(axis=-1) > 1e-3).mean())
+
+
+def test_outline_width_is_in_window_pixels_at_any_render_scale(tmp_path):
+    """A view rendered at half scale draws a 2-pixel outline 1 of its pixels wide: the outline's share of the
+    view's pixels (its length in them halves with the scale, their number quarters) stays (drawn 2 of the view's
+    pixels wide, it doubled)."""
+    full, half = _outline_share(tmp_path, 1.0), _outline_share(tmp_path, 0.5)
+    assert full > 0.01
+    assert 0.75 < half / full < 1.33, (full, half)  # 0.99 measured (1.9 before the width followed the scale)
