@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from engine.cli import validate_file
@@ -38,6 +39,20 @@ def test_paper_preset_is_the_papers_setup(registry):
 def test_showcase_validates(registry):
     plan = validate_file(SHOWCASE, registry)
     assert any(c == "GrassField" for ent in plan.entities for c, _ in ent.components)
+
+
+def test_showcase_runs_a_day():
+    """The showcase's sun_cycle (a day of 180 s from 8 o'clock) moves the sun 30 degrees in 15 s of game time."""
+    from engine.app import App
+    from engine.render.lighting import Lighting
+
+    app = App(SHOWCASE, strict=True)
+    app.step(1)
+    start = np.asarray(app.world.resource(Lighting).sun_direction)
+    app.step(round(15.0 / app.config.scene.fixed_dt))
+    end = np.asarray(app.world.resource(Lighting).sun_direction)
+    angle = np.degrees(np.arccos(np.clip(start @ end / np.linalg.norm(start) / np.linalg.norm(end), -1.0, 1.0)))
+    assert abs(angle - 30.0) < 1.0, angle
 
 
 def _problems(tmp_path, registry, body: str):
