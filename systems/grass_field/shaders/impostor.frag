@@ -64,23 +64,25 @@ float sun_share(vec3 m, float y2, vec3 l) {
     return mix(band2, single, agree * agree);
 }
 void main() {
+    // all three images are read before the discard, where implicit derivatives are defined: llvmpipe shades
+    // whole blocks of pixels whether or not some are discarded, and its implicit level of detail (one per 2 x 2
+    // pixels) costs less than textureGrad's (one per pixel): -0.3 ms of a 2.3 ms level-4 pass in the bench
     vec4 c = texture(atlas_tex, v_uv_a);
+    vec2 depth = texture(atlas_depth, v_uv_a).rg;
+    vec4 t = texture(atlas_normal, v_uv_a);
 #ifdef BLEND_VIEWS
     c = mix(c, texture(atlas_tex, v_uv_b), v_blend);
+    vec2 depth_b = texture(atlas_depth, v_uv_b).rg;
+    vec4 t_b = texture(atlas_normal, v_uv_b);
 #endif
-    // the images beside the colour are read after the discard below, where implicit derivatives are undefined:
-    // take them here (the two views' tiles have the same scale)
-    vec2 uv_dx = dFdx(v_uv_a), uv_dy = dFdy(v_uv_a);
     if (c.a < 0.5) discard;
     vec3 albedo = c.rgb / c.a;
-    vec2 depth = textureGrad(atlas_depth, v_uv_a, uv_dx, uv_dy).rg;
     float y2;
-    vec3 n = texel_normal(textureGrad(atlas_normal, v_uv_a, uv_dx, uv_dy), max(depth.g, 1e-3), y2);
+    vec3 n = texel_normal(t, max(depth.g, 1e-3), y2);
 #ifdef BLEND_VIEWS
     // as the colour: where only the second view has grass, the first's holds no depth (read as the near plane)
-    vec2 depth_b = textureGrad(atlas_depth, v_uv_b, uv_dx, uv_dy).rg;
     float y2_b;
-    vec3 n_b = texel_normal(textureGrad(atlas_normal, v_uv_b, uv_dx, uv_dy), max(depth_b.g, 1e-3), y2_b);
+    vec3 n_b = texel_normal(t_b, max(depth_b.g, 1e-3), y2_b);
     n = mix(n, n_b, v_blend);
     y2 = mix(y2, y2_b, v_blend);
     depth = mix(depth, depth_b, v_blend);
