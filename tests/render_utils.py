@@ -67,6 +67,33 @@ def render_app(app, width: int = 160, height: int = 120, frames: int = 1, steps_
         app.renderer = None
 
 
+def view_hdr_frames(app, frames: int = 1, width: int = 160, height: int = 120) -> np.ndarray:
+    """(frames, h, w, 3) float64: the first view's HDR colour after its passes, at the view's size (before any
+    upscale), over ``frames`` frames drawn without stepping the simulation."""
+    renderer = make_renderer(app, width, height)
+    out = []
+    try:
+        for _ in range(frames):
+            renderer.extract(app.world)
+            graph = renderer.declare()
+            view = renderer.views[0]
+
+            def setup(b, view=view):
+                b.read(view.color)
+
+            def execute(pc, view=view):
+                raw = np.frombuffer(pc.get(view.color).read(), np.float16).astype(np.float64)
+                out.append(raw.reshape(view.height, view.width, 4)[..., :3])
+
+            graph.add_pass("test.read_hdr", setup, execute, side_effect=True)
+            graph.execute()
+            renderer.frame_index += 1
+    finally:
+        renderer.release()
+        app.renderer = None
+    return np.array(out)
+
+
 def world_pixel(view, point) -> tuple[int, int]:
     """(row, column) of a world point in a view's image (row 0 at the top)."""
     clip = view.view_proj.astype(np.float64) @ np.array([*point, 1.0])

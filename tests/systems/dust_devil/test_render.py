@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from engine.app import App
-from tests.render_utils import assert_golden, make_renderer, render_app, respawn, track_gl_objects
+from tests.render_utils import (assert_golden, make_renderer, render_app, respawn, track_gl_objects,
+                                view_hdr_frames)
 from tests.systems.dust_devil.helpers import devil, scene_text
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -44,28 +45,7 @@ def app_for(tmp_path, name="scene", cameras=None, **kw) -> App:
 def hdr_frames(app, frames: int, width=96, height=72) -> np.ndarray:
     """(frames, h, w) luminance of the first view's HDR colour after the dust devil's passes, without stepping
     the simulation: every frame draws a new PBVR ensemble of the same particles."""
-    renderer = make_renderer(app, width, height)
-    out = []
-    try:
-        for _ in range(frames):
-            renderer.extract(app.world)
-            graph = renderer.declare()
-            view = renderer.views[0]
-
-            def setup(b):
-                b.read(view.color)
-
-            def execute(pc):
-                raw = np.frombuffer(pc.get(view.color).read(), np.float16).astype(np.float64)
-                out.append(raw.reshape(view.height, view.width, 4)[..., :3].mean(axis=-1))
-
-            graph.add_pass("test.read_hdr", setup, execute, side_effect=True)
-            graph.execute()
-            renderer.frame_index += 1
-    finally:
-        renderer.release()
-        app.renderer = None
-    return np.array(out)
+    return view_hdr_frames(app, frames, width, height).mean(axis=-1)
 
 
 def test_pbvr_mean_matches_single_pass_and_variance_falls_as_1_over_r(tmp_path, gl_ctx):

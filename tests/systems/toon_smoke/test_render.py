@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from systems.toon_smoke.render import ramp_texels
-from tests.render_utils import assert_golden, make_renderer, render_app
+from tests.render_utils import assert_golden, make_renderer, render_app, view_hdr_frames
 from tests.systems.toon_smoke.helpers import make_app, preset, scene_text
 
 STEPS = {"paper": 90, "chimney": 60, "explosion": 20}
@@ -182,30 +182,6 @@ def test_ramp_textures_of_earlier_exposures_are_released(tmp_path):
         app.renderer = None
 
 
-def _view_colour(app, width: int, height: int) -> np.ndarray:
-    """The first view's HDR colour after the frame's passes, at the view's size (before any upscale)."""
-    renderer = make_renderer(app, width, height)
-    out = []
-    try:
-        renderer.extract(app.world)
-        graph = renderer.declare()
-        view = renderer.views[0]
-
-        def setup(b):
-            b.read(view.color)
-
-        def execute(pc):
-            raw = np.frombuffer(pc.get(view.color).read(), np.float16).astype(np.float64)
-            out.append(raw.reshape(view.height, view.width, 4)[..., :3])
-
-        graph.add_pass("test.read_hdr", setup, execute, side_effect=True)
-        graph.execute()
-    finally:
-        renderer.release()
-        app.renderer = None
-    return out[0]
-
-
 def _outline_share(tmp_path, scale: float) -> float:
     """The share of the view's pixels the outline changes, the view of a 160 × 120 window rendered at ``scale``."""
     from components.toon_smoke import ToonSmokeState, ToonSmokeVolumeConfig
@@ -217,7 +193,7 @@ def _outline_share(tmp_path, scale: float) -> float:
     images = []
     for width in (2.0, 0.0):
         cfg.outline_width = width
-        images.append(_view_colour(app, 160, 120))
+        images.append(view_hdr_frames(app, 1, 160, 120)[0])
     assert images[0].shape[:2] == (round(120 * scale), round(160 * scale))
     return float((np.abs(images[0] - images[1]).max(axis=-1) > 1e-3).mean())
 
