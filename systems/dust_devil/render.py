@@ -395,15 +395,16 @@ class DustDevilParticles(RenderFeature):
             uniforms = dict(view_proj=view.view_proj.T.copy(), sub_particles=devil.sub_particles,
                             frame_key=self.frame_key, radius=devil.radius,
                             point_size=devil.point_size, view_size=(view.width, view.height), scene_depth=0)
+            side = max(1, math.ceil(devil.point_size))  # POINT_SIDE: pixels a point spans per axis (under 1: 0 or 1)
             if self.compute:
                 n = len(devil.positions)
-                shader = self._compute(max(1, math.ceil(devil.point_size)))
+                shader = self._compute(side)
                 self._particle_buffer(devil).bind_to_storage_buffer(0)
                 self._bind_ball(shader)
                 set_uniforms(shader, particles=n, repeats=devil.repeats, **uniforms)
                 shader.run((n + COMPUTE_GROUP - 1) // COMPUTE_GROUP)
             else:
-                vao = self._vao(devil, "pbvr_scatter", (f"POINT_SIDE {max(1, math.ceil(devil.point_size))}",))
+                vao = self._vao(devil, "pbvr_scatter", (f"POINT_SIDE {side}",))
                 self._bind_ball(vao.program)
                 set_uniforms(vao.program, **uniforms)
                 ctx.enable(moderngl.RASTERIZER_DISCARD)
